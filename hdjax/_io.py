@@ -1,0 +1,302 @@
+"""Reading and writing recordings: CSV and `.npz`, with an optional column map.
+
+A log in another layout (encoder counts, degrees, other column names, multi-turn counters,
+unknown offsets) is read through a [`hdjax.ColumnMap`][]: for each schema column, the source
+column, a scale and an offset, and for counters that wrap, their modulus. Counter values are read
+as float64, which holds integers exactly up to 2^53, and converted to radians in float64.
+
+Writes are atomic: a file appears complete or not at all.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import difflib
+import math
+import os
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from ._errors import ConfigError, DataError
+from ._recording import CORE_COLUMNS, SIGNAL_COLUMNS, Recording, make_recording
+
+_COLUMN_KEYS = ("source", "scale", "offset", "counts_per_rev", "modulus")
+
+
+def did_you_mean(name: str, options) -> str:
+    """A ` (did you mean 'x'?)` hint, or an empty string when nothing is close."""
+    close = difflib.get_close_matches(name, list(options), n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+@dataclasses.dataclass(frozen=True)
+class ColumnSpec:
+    """How one schema column is read from a source column.
+
+    `value = unwrap(raw) * scale + offset`, where `scale` defaults to `2*pi/counts_per_rev` when
+    that is given, `unwrap` removes wraps of a counter of period `modulus` counts, and `offset` is
+    a number or `"first"` (subtract the first sample, as Song et al. eqs. (11)-(12) do with the
+    initial encoder value).
+    """
+
+    source: str
+    scale: float = 1.0
+    offset: float | str = 0.0
+    modulus: float | None = None
+
+    def apply(self, raw: np.ndarray) -> np.ndarray:
+        """The converted column (float64)."""
+        x = np.asarray(raw, dtype=np.float64)
+        if self.modulus is not None:
+            x = np.unwrap(x, period=self.modulus)
+        if self.offset == "first":
+            x = x - x[0]
+            return x * self.scale
+        return x * self.scale + float(self.offset)
+
+
+@dataclasses.dataclass(frozen=True)
+class ColumnMap:
+    """Maps the recording schema onto the columns of a log file.
+
+    **Arguments:**
+
+    - `columns`: schema name (`t`, `theta_m`, `theta_l`, `current`, `torque`) to a
+      [`hdjax.ColumnSpec`][]; unmapped schema names are read from a column of the same name.
+    - `extras`: extra column name to spec; `None` keeps every other numeric column of the file
+      under its own name, an empty mapping keeps none.
+    """
+
+    columns: Mapping[str, ColumnSpec] = dataclasses.field(default_factory=dict)
+    extras: Mapping[str, ColumnSpec] | None = None
+
+    @classmethod
+    def from_dict(cls, table: Mapping, *, where: str = "[data]") -> ColumnMap:
+        """Build from a TOML-like table: `{"columns": {...}, "extras": {...}}`.
+
+        Each entry is either a source column name or a table with `source`, `scale`,
+        `offset`, `counts_per_rev`, `modulus`.
+        """
+        unknown = set(table) - {"columns", "extras"}
+        if unknown:
+            key = sorted(unknown)[0]
+            raise ConfigError(
+                f"{where}: unknown key {key!r}{did_you_mean(key, ['columns', 'extras'])}"
+            )
+        columns = {}
+        for name, entry in (table.get("columns") or {}).items():
+            if name not in SIGNAL_COLUMNS:
+                raise ConfigError(
+                    f"{where}.columns: {name!r} is not a schema column"
+                    f"{did_you_mean(name, SIGNAL_COLUMNS)}; schema columns are "
+                    f"{', '.join(SIGNAL_COLUMNS)} (put other columns under extras)"
+                )
+            columns[name] = _spec(entry, f"{where}.columns.{name}")
+        extras = table.get("extras")
+        if extras is not None:
+            extras = {k: _spec(v, f"{where}.extras.{k}") for k, v in extras.items()}
+        return cls(columns=columns, extras=extras)
+
+
+def _spec(entry, where: str) -> ColumnSpec:
+    if isinstance(entry, str):
+        return ColumnSpec(source=entry)
+    if not isinstance(entry, Mapping):
+        raise ConfigError(f"{where}: expected a column name or a table, got {entry!r}")
+    for key in entry:
+        if key not in _COLUMN_KEYS:
+            raise ConfigError(f"{where}: unknown key {key!r}{did_you_mean(key, _COLUMN_KEYS)}")
+    if "source" not in entry:
+        raise ConfigError(f"{where}: missing 'source' (the column name in the file)")
+    scale = entry.get("scale")
+    cpr = entry.get("counts_per_rev")
+    if scale is not None and cpr is not None:
+        raise ConfigError(f"{where}: give either 'scale' or 'counts_per_rev', not both")
+    if cpr is not None:
+        if not isinstance(cpr, (int, float)) or cpr <= 0:
+            raise ConfigError(f"{where}: 'counts_per_rev' must be a positive number, got {cpr!r}")
+        scale = 2.0 * math.pi / float(cpr)
+    scale = 1.0 if scale is None else scale
+    if not isinstance(scale, (int, float)) or scale == 0 or not math.isfinite(scale):
+        raise ConfigError(f"{where}: 'scale' must be a finite non-zero number, got {scale!r}")
+    offset = entry.get("offset", 0.0)
+    if offset != "first" and not isinstance(offset, (int, float)):
+        raise ConfigError(f"{where}: 'offset' must be a number or \"first\", got {offset!r}")
+    modulus = entry.get("modulus")
+    if modulus is not None and (not isinstance(modulus, (int, float)) or modulus <= 0):
+        raise ConfigError(f"{where}: 'modulus' must be a positive number, got {modulus!r}")
+    return ColumnSpec(
+        source=str(entry["source"]), scale=float(scale), offset=offset, modulus=modulus
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# Reading
+
+
+def _read_csv_table(path: Path) -> tuple[list[str], np.ndarray]:
+    """Header and float64 body of a CSV file, with messages that name the bad cell."""
+    if not path.exists():
+        raise DataError(f"{path}: no such file")
+    if path.stat().st_size == 0:
+        raise DataError(f"{path}: the file is empty; expected a header row and data rows")
+    with path.open(newline="") as fh:
+        reader = csv.reader(fh)
+        try:
+            header = [h.strip() for h in next(reader)]
+        except StopIteration:
+            raise DataError(f"{path}: the file is empty; expected a header row") from None
+        rows = list(reader)
+    if len(set(header)) != len(header):
+        dup = sorted({h for h in header if header.count(h) > 1})
+        raise DataError(f"{path}: duplicated column name(s) in the header: {', '.join(dup)}")
+    rows = [r for r in rows if r and any(c.strip() for c in r)]
+    if not rows:
+        raise DataError(f"{path}: the file has a header but no data rows")
+    body = np.empty((len(rows), len(header)), dtype=np.float64)
+    for i, row in enumerate(rows):
+        if len(row) != len(header):
+            raise DataError(
+                f"{path}: line {i + 2} has {len(row)} cells but the header has {len(header)}; "
+                "columns of different lengths cannot form a recording"
+            )
+        try:
+            body[i] = [float(c) if c.strip() != "" else math.nan for c in row]
+        except ValueError:
+            for j, cell in enumerate(row):
+                try:
+                    float(cell)
+                except ValueError:
+                    raise DataError(
+                        f"{path}: non-numeric cell {cell!r} in column {header[j]!r} at line "
+                        f"{i + 2}; every cell must be a number"
+                    ) from None
+    return header, body
+
+
+def _build(
+    table: Mapping[str, np.ndarray], columns: ColumnMap | None, source: str, check_units: bool
+) -> Recording:
+    columns = columns or ColumnMap()
+    available = list(table)
+    used = set()
+
+    def read(name: str, spec: ColumnSpec) -> np.ndarray:
+        if spec.source not in table:
+            raise DataError(
+                f"{source}: no column {spec.source!r} (for {name!r})"
+                f"{did_you_mean(spec.source, available)}; the file has: {', '.join(available)}"
+            )
+        used.add(spec.source)
+        return spec.apply(table[spec.source])
+
+    signals = {}
+    for name in SIGNAL_COLUMNS:
+        spec = columns.columns.get(name)
+        if spec is None:
+            if name not in table:
+                if name == "torque":
+                    continue
+                raise DataError(
+                    f"{source}: missing column {name!r}{did_you_mean(name, available)}; the file "
+                    f"has: {', '.join(available)}. Rename it or map it with a [data.columns] table"
+                )
+            spec = ColumnSpec(source=name)
+        signals[name] = read(name, spec)
+    if columns.extras is None:
+        extras = {k: np.asarray(v, np.float64) for k, v in table.items() if k not in used}
+        extras = {k: v for k, v in extras.items() if k not in SIGNAL_COLUMNS}
+    else:
+        extras = {k: read(k, spec) for k, spec in columns.extras.items()}
+    return make_recording(
+        signals["t"],
+        signals["theta_m"],
+        signals["theta_l"],
+        signals["current"],
+        signals.get("torque"),
+        extras,
+        source=source,
+        check_units=check_units,
+    )
+
+
+def load_csv(path, columns: ColumnMap | None = None, *, check_units: bool = True) -> Recording:
+    """Load a [`hdjax.Recording`][] from a CSV file with a header row.
+
+    Without `columns` the header must name `t, theta_m, theta_l, current` (and optionally
+    `torque`) in SI units; every other column is kept as an extra. With a
+    [`hdjax.ColumnMap`][] the columns are renamed, scaled and offset first.
+    """
+    path = Path(path)
+    header, body = _read_csv_table(path)
+    table = {name: body[:, j] for j, name in enumerate(header)}
+    return _build(table, columns, str(path), check_units)
+
+
+def load_npz(path, columns: ColumnMap | None = None, *, check_units: bool = True) -> Recording:
+    """Load a [`hdjax.Recording`][] from a `.npz` archive holding one array per column."""
+    path = Path(path)
+    if not path.exists():
+        raise DataError(f"{path}: no such file")
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            table = {k: np.asarray(archive[k]) for k in archive.files}
+    except (OSError, ValueError) as err:
+        raise DataError(f"{path}: not a readable .npz archive ({err})") from None
+    if not table:
+        raise DataError(f"{path}: the archive is empty")
+    return _build(table, columns, str(path), check_units)
+
+
+def load_recording(path, columns: ColumnMap | None = None, *, check_units: bool = True):
+    """Load a recording from `.csv` or `.npz`, chosen by the file's suffix."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".csv":
+        return load_csv(path, columns, check_units=check_units)
+    if suffix == ".npz":
+        return load_npz(path, columns, check_units=check_units)
+    raise DataError(f"{path}: unknown recording format {suffix!r}; use .csv or .npz")
+
+
+# ---------------------------------------------------------------------------------------------
+# Writing
+
+
+def atomic_write_bytes(path, data: bytes) -> None:
+    """Write `data` to `path` through a temporary file and a rename (never half-written)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def save_csv(recording: Recording, path) -> None:
+    """Write a recording as CSV (all columns, full float64 precision), atomically."""
+    cols = recording.to_numpy()
+    names = list(cols)
+    import io
+
+    buf = io.StringIO()
+    body = np.column_stack([cols[k] for k in names])
+    np.savetxt(buf, body, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+    atomic_write_bytes(path, buf.getvalue().encode())
+
+
+def save_npz(recording: Recording, path) -> None:
+    """Write a recording as `.npz`, atomically."""
+    import io
+
+    buf = io.BytesIO()
+    np.savez(buf, **recording.to_numpy())
+    atomic_write_bytes(path, buf.getvalue())
