@@ -30,13 +30,13 @@ from ._errors import (  # noqa: E402
     DataError as DataError,
     DivergenceError as DivergenceError,
     HdjaxError as HdjaxError,
-    UnitWarning as UnitWarning,
     InversionError as InversionError,
     ModelMismatchError as ModelMismatchError,
+    UnitWarning as UnitWarning,
 )
 from ._features import (  # noqa: E402
-    finite_difference_velocity as finite_difference_velocity,
     find_gaps as find_gaps,
+    finite_difference_velocity as finite_difference_velocity,
     smoothed_velocity as smoothed_velocity,
     twist as twist,
 )

@@ -58,9 +58,9 @@ def _local_slope(t, theta, half_window: int):
     tw = t[idx] - t[:, None]
     xw = theta[idx] - theta[:, None]  # local reference keeps float64 precision on big angles
     # Clipped windows repeat edge samples; weight each distinct sample once.
-    first = jnp.concatenate(
-        [jnp.ones((n, 1), bool), idx[:, 1:] != idx[:, :-1]], axis=1
-    ).astype(t.dtype)
+    first = jnp.concatenate([jnp.ones((n, 1), bool), idx[:, 1:] != idx[:, :-1]], axis=1).astype(
+        t.dtype
+    )
     wsum = first.sum(axis=1, keepdims=True)
     tm = (first * tw).sum(axis=1, keepdims=True) / wsum
     xm = (first * xw).sum(axis=1, keepdims=True) / wsum

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ._errors import ConfigError, DataError
-from ._recording import CORE_COLUMNS, SIGNAL_COLUMNS, Recording, make_recording
+from ._recording import SIGNAL_COLUMNS, Recording, make_recording
 
 _COLUMN_KEYS = ("source", "scale", "offset", "counts_per_rev", "modulus")
 

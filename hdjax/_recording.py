@@ -147,9 +147,7 @@ def _as_column(name: str, values, source: str) -> np.ndarray:
             f"{source}: column {name!r} is not numeric ({err}); every cell must be a number"
         ) from None
     if arr.ndim != 1:
-        raise DataError(
-            f"{source}: column {name!r} must be one-dimensional, got shape {arr.shape}"
-        )
+        raise DataError(f"{source}: column {name!r} must be one-dimensional, got shape {arr.shape}")
     bad = ~np.isfinite(arr)
     if bad.any():
         first = int(np.flatnonzero(bad)[0])

@@ -1,0 +1,36 @@
+"""The Song et al. (2019) compliance model: structure, calibration and torque inversion."""
+
+from ._inversion import (
+    TorqueEstimate as TorqueEstimate,
+    estimate_torque as estimate_torque,
+    estimate_torque_arrays as estimate_torque_arrays,
+)
+from ._lstsq import (
+    CalibrationResult as CalibrationResult,
+    calibrate_lstsq as calibrate_lstsq,
+    check_invertible as check_invertible,
+)
+from ._model import ComplianceModel as ComplianceModel, paper_knots as paper_knots
+from ._rls import (
+    RLSState as RLSState,
+    calibrate_rls as calibrate_rls,
+    rls_init as rls_init,
+    rls_scan as rls_scan,
+    rls_solve as rls_solve,
+    rls_step as rls_step,
+)
+from ._signals import Signals as Signals, signals_from_recording as signals_from_recording
+from ._terms import (
+    Backlash as Backlash,
+    Column as Column,
+    ColumnTimesTorque as ColumnTimesTorque,
+    Constant as Constant,
+    Coulomb as Coulomb,
+    CurrentPolynomial as CurrentPolynomial,
+    Harmonics as Harmonics,
+    Hysteresis as Hysteresis,
+    PaperFourier as PaperFourier,
+    Stiffening as Stiffening,
+    Viscous as Viscous,
+    dahl_state as dahl_state,
+)

@@ -1,0 +1,333 @@
+"""Term groups: named blocks of design-matrix columns of the twist model.
+
+The twist model of Song et al. eq. (10) is linear in its coefficients,
+
+$$\\Delta\\theta = \\sum_j k_j \\phi_j(T) + h(x) + \\sum_g c_g^\\top \\psi_g(x, T),$$
+
+with the piecewise-linear flexspline basis $\\phi_j$ (eq. (7)), the torque-free terms $h$ of the
+wave generator (eq. (8)) and the kinematic error (eq. (9)), and optional *effect* groups
+$\\psi_g$ added by the residual loop. Each group is a frozen, hashable dataclass (so it can sit in
+a static field of an `eqx.Module`) with a `key`, column `names` and a pure `columns` function.
+
+`torque_kind` tells the inversion how a group depends on the torque $T$:
+
+- `"none"`: not at all (a column of $h$);
+- `"linear"`: linearly, $\\psi = u(x) T$ (a stiffness that drifts with a column such as
+  temperature) - solved in closed form;
+- `"memoryless"`: nonlinearly through the present torque only (stiffening, backlash) - solved by
+  safeguarded Newton steps;
+- `"path"`: through the torque history (hysteresis) - solved by fixed-point iteration on the
+  estimated torque path, computed causally.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+
+from ._signals import Signals
+
+TORQUE_KINDS = ("none", "linear", "memoryless", "path")
+
+
+def _fmt(order: float) -> str:
+    """An order as a short decimal string (`2`, `1.98`, `0.5`)."""
+    return f"{order:.10g}"
+
+
+@dataclasses.dataclass(frozen=True)
+class Constant:
+    """Constant offset $k_0 = \\omega_0/N + a_0$ (eq. (10)); also absorbs encoder offsets."""
+
+    key: str = "constant"
+    torque_kind: str = "none"
+
+    def names(self) -> tuple[str, ...]:
+        return ("k0",)
+
+    def columns(self, sig: Signals, torque=None):
+        return jnp.ones((sig.n_samples, 1), jnp.float64)
+
+
+@dataclasses.dataclass(frozen=True)
+class CurrentPolynomial:
+    """Wave-generator deformation as a polynomial in current, eq. (8), without its constant.
+
+    Columns $I, I^2, \\dots, I^p$; the fitted coefficient of $I^i$ is $\\omega_i / N$ (eq. (10)).
+    `scale` divides the current first (the rated current, say) so high powers stay O(1).
+    """
+
+    order: int = 6
+    scale: float = 1.0
+    key: str = "current:poly"
+    torque_kind: str = "none"
+
+    def names(self) -> tuple[str, ...]:
+        return tuple(f"w{i}" for i in range(1, self.order + 1))
+
+    def columns(self, sig: Signals, torque=None):
+        x = sig.current / self.scale
+        return jnp.stack([x**i for i in range(1, self.order + 1)], axis=1)
+
+
+@dataclasses.dataclass(frozen=True)
+class PaperFourier:
+    """Kinematic error in the paper's form, eq. (9), without its constant $a_0$.
+
+    For $n = 1..$`order`: $\\cos(n\\theta_{fso}\\omega_{fso}), \\sin(n\\theta_{fso}\\omega_{fso}),
+    \\cos(n\\theta_{wgi}\\omega_{wgi}), \\sin(n\\theta_{wgi}\\omega_{wgi})$ with coefficients
+    $a_n, b_n, c_n, d_n$. (The argument angle-times-velocity is the paper's; plain harmonics of
+    the angles are [`hdjax.compliance.Harmonics`][].)
+    """
+
+    order: int = 3
+    key: str = "kinematic:paper"
+    torque_kind: str = "none"
+
+    def names(self) -> tuple[str, ...]:
+        out = []
+        for n in range(1, self.order + 1):
+            out += [f"a{n}", f"b{n}", f"c{n}", f"d{n}"]
+        return tuple(out)
+
+    def columns(self, sig: Signals, torque=None):
+        ul = sig.theta_l * sig.omega_l
+        um = sig.theta_m * sig.omega_m
+        cols = []
+        for n in range(1, self.order + 1):
+            cols += [jnp.cos(n * ul), jnp.sin(n * ul), jnp.cos(n * um), jnp.sin(n * um)]
+        return jnp.stack(cols, axis=1)
+
+
+@dataclasses.dataclass(frozen=True)
+class Harmonics:
+    """Harmonics of one angle at a list of (possibly non-integer) orders: $\\cos(k\\theta),
+    \\sin(k\\theta)$ per order $k$ - the kinematic error as a function of angle alone."""
+
+    signal: str = "theta_m"
+    orders: tuple[float, ...] = (1.0, 2.0)
+    torque_kind: str = "none"
+
+    @property
+    def key(self) -> str:
+        return ",".join(f"harmonic:{self.signal}:{_fmt(k)}" for k in self.orders)
+
+    def names(self) -> tuple[str, ...]:
+        out = []
+        for k in self.orders:
+            out += [f"cos({_fmt(k)}*{self.signal})", f"sin({_fmt(k)}*{self.signal})"]
+        return tuple(out)
+
+    def columns(self, sig: Signals, torque=None):
+        theta = sig.get(self.signal)
+        cols = []
+        for k in self.orders:
+            cols += [jnp.cos(k * theta), jnp.sin(k * theta)]
+        return jnp.stack(cols, axis=1)
+
+
+@dataclasses.dataclass(frozen=True)
+class Coulomb:
+    """Coulomb-like friction signature, a smooth sign $\\tanh(\\omega/\\omega_s)$ of a velocity."""
+
+    signal: str = "omega_m"
+    omega_s: float = 1.0
+    torque_kind: str = "none"
+
+    @property
+    def key(self) -> str:
+        return f"coulomb:{self.signal}"
+
+    def names(self) -> tuple[str, ...]:
+        return (f"tanh({self.signal}/{_fmt(self.omega_s)})",)
+
+    def columns(self, sig: Signals, torque=None):
+        return jnp.tanh(sig.get(self.signal) / self.omega_s)[:, None]
+
+
+@dataclasses.dataclass(frozen=True)
+class Viscous:
+    """Viscous friction signature: a velocity, divided by `scale`."""
+
+    signal: str = "omega_m"
+    scale: float = 1.0
+    torque_kind: str = "none"
+
+    @property
+    def key(self) -> str:
+        return f"viscous:{self.signal}"
+
+    def names(self) -> tuple[str, ...]:
+        return (f"{self.signal}/{_fmt(self.scale)}",)
+
+    def columns(self, sig: Signals, torque=None):
+        return (sig.get(self.signal) / self.scale)[:, None]
+
+
+@dataclasses.dataclass(frozen=True)
+class Column:
+    """An extra recording column (e.g. `temperature`), centred and scaled: a twist drift."""
+
+    name: str
+    center: float = 0.0
+    scale: float = 1.0
+    torque_kind: str = "none"
+
+    @property
+    def key(self) -> str:
+        return f"column:{self.name}"
+
+    def names(self) -> tuple[str, ...]:
+        return (f"({self.name}-{_fmt(self.center)})/{_fmt(self.scale)}",)
+
+    def columns(self, sig: Signals, torque=None):
+        return ((sig.get(self.name) - self.center) / self.scale)[:, None]
+
+    def slope(self, sig: Signals):
+        """$u(x)$ such that the column is $u(x)$ (no torque dependence)."""
+        return (sig.get(self.name) - self.center) / self.scale
+
+
+@dataclasses.dataclass(frozen=True)
+class ColumnTimesTorque:
+    """An extra column times torque: a compliance that drifts with e.g. temperature,
+    $\\psi = \\frac{x - x_0}{s} \\frac{T}{\\tau_0}$ (linear in torque, inverted in closed form)."""
+
+    name: str
+    center: float = 0.0
+    scale: float = 1.0
+    torque_scale: float = 1.0
+    torque_kind: str = "linear"
+
+    @property
+    def key(self) -> str:
+        return f"column:{self.name}*torque"
+
+    def names(self) -> tuple[str, ...]:
+        return (
+            f"({self.name}-{_fmt(self.center)})/{_fmt(self.scale)}*T/{_fmt(self.torque_scale)}",
+        )
+
+    def torque_slope(self, sig: Signals):
+        """$u(x)$ with $\\psi = u(x) T$."""
+        return (sig.get(self.name) - self.center) / (self.scale * self.torque_scale)
+
+    def columns(self, sig: Signals, torque):
+        return (self.torque_slope(sig) * torque)[:, None]
+
+
+@dataclasses.dataclass(frozen=True)
+class Stiffening:
+    """Nonlinear stiffness beyond the piecewise segments: $(T/\\tau_s)^3$ (odd, smooth)."""
+
+    torque_scale: float = 1.0
+    key: str = "stiffness:cubic"
+    torque_kind: str = "memoryless"
+
+    def names(self) -> tuple[str, ...]:
+        return (f"(T/{_fmt(self.torque_scale)})^3",)
+
+    def columns(self, sig: Signals, torque):
+        return ((torque / self.torque_scale) ** 3)[:, None]
+
+    def value_and_slope(self, torque):
+        u = torque / self.torque_scale
+        return u**3, 3.0 * u**2 / self.torque_scale
+
+
+@dataclasses.dataclass(frozen=True)
+class Backlash:
+    """Lost motion around zero torque: a smooth step $\\tanh(T/T_b)$ of width $T_b$."""
+
+    width: float = 1.0
+    key: str = "backlash:torque"
+    torque_kind: str = "memoryless"
+
+    def names(self) -> tuple[str, ...]:
+        return (f"tanh(T/{_fmt(self.width)})",)
+
+    def columns(self, sig: Signals, torque):
+        return jnp.tanh(torque / self.width)[:, None]
+
+    def value_and_slope(self, torque):
+        v = jnp.tanh(torque / self.width)
+        return v, (1.0 - v**2) / self.width
+
+
+def dahl_state(torque, torque_scale: float):
+    """Causal Dahl-type hysteresis state driven by a torque path.
+
+    $z_k = z_{k-1} + \\frac{\\Delta T_k}{T_h} (1 - z_{k-1}\\,\\mathrm{sgn}\\,\\Delta T_k)$, clipped to
+    $[-1, 1]$: the rate-independent Dahl model ($\\sigma = 1$) with the torque as its input, so
+    $z$ saturates at $\\pm 1$ after a torque reversal of a few $T_h$ (the loop of Song et al.
+    Fig. 2, B to B'). Starts at $z_0 = 0$.
+    """
+
+    def _step(z, dT):
+        # Dahl: dz = dT/Th * (1 - z sign(dT)); explicit step, clipped for large dT.
+        z = z + dT / torque_scale * (1.0 - z * jnp.sign(dT))
+        z = jnp.clip(z, -1.0, 1.0)
+        return z, z
+
+    dT = jnp.diff(torque, prepend=torque[:1])
+    _, z = jax.lax.scan(_step, jnp.zeros((), torque.dtype), dT)
+    return z
+
+
+@dataclasses.dataclass(frozen=True)
+class Hysteresis:
+    """Hysteresis in twist as a Dahl state driven by the torque path ([`dahl_state`][]).
+
+    At calibration the state is driven by the reference torque; at estimation by the torque
+    being estimated (fixed-point iteration, causal), never by the reference sensor.
+    """
+
+    torque_scale: float = 1.0
+    key: str = "hysteresis:torque"
+    torque_kind: str = "path"
+
+    def names(self) -> tuple[str, ...]:
+        return (f"dahl(T/{_fmt(self.torque_scale)})",)
+
+    def columns(self, sig: Signals, torque):
+        return dahl_state(torque, self.torque_scale)[:, None]
+
+
+TERM_TYPES = (
+    Constant,
+    CurrentPolynomial,
+    PaperFourier,
+    Harmonics,
+    Coulomb,
+    Viscous,
+    Column,
+    ColumnTimesTorque,
+    Stiffening,
+    Backlash,
+    Hysteresis,
+)
+
+
+def term_to_dict(term) -> dict:
+    """A JSON-ready description of a term group (for saved models and reports)."""
+    d = {"type": type(term).__name__}
+    for f in dataclasses.fields(term):
+        v = getattr(term, f.name)
+        d[f.name] = list(v) if isinstance(v, tuple) else v
+    return d
+
+
+def term_from_dict(d: dict):
+    """Inverse of [`term_to_dict`][]."""
+    types = {t.__name__: t for t in TERM_TYPES}
+    d = dict(d)
+    cls = types[d.pop("type")]
+    kwargs = {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()}
+    return cls(**kwargs)
+
+
+def is_finite_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
