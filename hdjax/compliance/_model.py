@@ -32,11 +32,23 @@ _PAPER_K_NAMES = ("k3", "k2", "k1", "k4", "k5")
 
 
 def paper_knots(rated_torque: float, n_segments: int = 5) -> tuple[float, ...]:
-    """Inner knots splitting $[-\\tau_0, \\tau_0]$ into `n_segments` equal segments (eq. (7))."""
-    if n_segments < 1:
-        raise ConfigError(f"n_segments must be >= 1, got {n_segments}")
-    edges = np.linspace(-rated_torque, rated_torque, n_segments + 1)
-    return tuple(float(x) for x in edges[1:-1])
+    """Inner knots of eq. (7), generalised to any odd number of segments.
+
+    Five segments give the paper's knots $\\pm\\tau_0/3, \\pm 2\\tau_0/3$ (a central segment
+    $[-\\tau_0/3, \\tau_0/3)$ twice as wide as the others); $2m+1$ segments put knots at
+    $\\pm j\\tau_0/(m+1)$, $j = 1..m$. The count must be odd so the segments are symmetric
+    and 0 N·m lies inside the central one; pass explicit `knots` for other layouts.
+    """
+    if isinstance(n_segments, bool) or not isinstance(n_segments, int) or n_segments < 1:
+        raise ConfigError(f"n_segments must be a positive odd integer, got {n_segments!r}")
+    if n_segments % 2 == 0:
+        raise ConfigError(
+            f"n_segments must be odd (segments symmetric about 0 N·m, as eq. (7)), got "
+            f"{n_segments}; give explicit knots for other layouts"
+        )
+    m = (n_segments - 1) // 2
+    pos = [rated_torque * j / (m + 1) for j in range(1, m + 1)]
+    return tuple([-x for x in reversed(pos)] + pos)
 
 
 class ComplianceModel(eqx.Module):
@@ -268,7 +280,12 @@ class ComplianceModel(eqx.Module):
 
     def segment_index(self, torque) -> Array:
         """Index of the segment each torque falls in (`[l_j, u_j)` as eq. (7))."""
-        return jnp.searchsorted(jnp.asarray(self.knots, jnp.float64), torque, side="right")
+        # the number of knots at or below the torque (searchsorted side="right"), elementwise
+        torque = jnp.asarray(torque, jnp.float64)
+        seg = jnp.zeros(torque.shape, jnp.int32)
+        for knot in self.knots:
+            seg = seg + (torque >= knot).astype(jnp.int32)
+        return seg
 
     def base_columns(self, sig: Signals) -> Float[Array, "n n_base"]:
         """Columns of the base terms (shared layout, before per-segment expansion)."""

@@ -1,0 +1,103 @@
+"""`hdjax discover`: the residual loop from the command line (the contract of issue 6).
+
+    hdjax discover --train TRAIN.csv --test TEST.csv --joint JOINT.toml --out DIR
+
+Exit code 0 on success; on bad input 2 and a one-line reason on stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from pathlib import Path
+
+from .._errors import DataError, HdjaxError
+
+
+def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
+    p = parser or argparse.ArgumentParser(prog="hdjax discover")
+    p.description = (
+        "Find what a calibrated compliance model gets wrong on TRAIN, name the physical effect, "
+        "add it, refit, and report the torque error on TEST before and after. Example: hdjax "
+        "discover --train train.csv --test test.csv --joint joint.toml --out runs/discover"
+    )
+    p.add_argument("--train", required=True, type=Path,
+                   help="training recording (CSV: t, theta_m, theta_l, current, torque [+ extras])")
+    p.add_argument("--test", required=True, type=Path,
+                   help="test recording, same columns; used for reporting only, never to select")
+    p.add_argument("--joint", required=True, type=Path,
+                   help="TOML file with a [joint] table (ratio, rated_torque, optional twist_sign)")
+    p.add_argument("--out", required=True, type=Path,
+                   help="output folder (absent or empty unless --overwrite) for report.json, "
+                   "report.md and figures/")
+    p.add_argument("--overwrite", action="store_true", help="replace the files of a previous run")
+    p.add_argument("--max-effects", type=int, default=5, help="most effects to add (default 5)")
+    p.add_argument("--min-gain", type=float, default=0.02,
+                   help="least cross-validated share of the twist error an effect must remove "
+                   "(default 0.02)")
+    p.add_argument("--ignore-column", action="append", default=[], metavar="NAME",
+                   help="leave an extra column out of the analysis (repeatable)")
+    p.add_argument("--no-figures", action="store_true", help="write report.json and report.md only")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    """Carry out a parsed `discover` command; raises `HdjaxError` on bad input."""
+    import hdjax
+
+    from ._checks import check_inputs
+    from ._loop import DiscoverOptions, discover
+    from ._report import write_report
+
+    out: Path = args.out
+    if out.exists() and not out.is_dir():
+        raise DataError(f"--out {out} exists and is not a folder")
+    if out.exists() and any(out.iterdir()) and not args.overwrite:
+        raise DataError(f"--out {out} exists and is not empty; pass --overwrite to replace it")
+    if args.max_effects < 0:
+        raise DataError(f"--max-effects must be >= 0, got {args.max_effects}")
+    if not 0.0 < args.min_gain < 1.0:
+        raise DataError(f"--min-gain must lie in (0, 1), got {args.min_gain}")
+    joint = hdjax.load_joint(args.joint)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        train = hdjax.load_csv(args.train)
+        test = hdjax.load_csv(args.test)
+    say = (lambda s: None) if args.quiet else (lambda s: print(f"[discover] {s}", file=sys.stderr))
+    for w in caught:
+        say(f"warning: {w.message}")
+    options = DiscoverOptions(max_effects=args.max_effects, min_gain=args.min_gain)
+    ignore = tuple(args.ignore_column)
+    notes = check_inputs(
+        train, test, joint, min_order_m=options.library.orders_m[0], ignore_columns=ignore
+    )
+    if ignore:
+        import equinox as eqx
+
+        drop = lambda r: eqx.tree_at(
+            lambda x: x.extras, r, {k: v for k, v in r.extras.items() if k not in ignore}
+        )
+        train, test = drop(train), drop(test)
+    result = discover(train, test, joint, options, progress=say)
+    result.notes[:0] = notes + [f"input warning: {w.message}" for w in caught]
+    say("writing report" + ("" if args.no_figures else " and figures"))
+    write_report(
+        result, out, train=train, figures=not args.no_figures,
+        extra={"train": str(args.train), "test": str(args.test), "joint": joint.to_dict(),
+               "version": hdjax.__version__},
+    )
+    say(f"done in {result.seconds:.1f} s: effects {result.effects or 'none'}; TEST torque RMS "
+        f"{result.baseline.rms:.4g} -> {result.final.rms:.4g} N·m")
+    return 0
+
+
+def cli_main(argv: list[str] | None = None) -> int:
+    """Entry point: parse `argv`, run, and turn bad input into one line on stderr, exit 2."""
+    args = build_parser().parse_args(argv)
+    try:
+        return run(args)
+    except HdjaxError as err:
+        print(f"hdjax discover: error: {err}".replace("\n", " "), file=sys.stderr)
+        return 2

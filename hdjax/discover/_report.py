@@ -1,0 +1,230 @@
+"""The discover report: `report.json`, figures and `report.md`, written atomically."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ._loop import ARCSEC, DiscoveryResult, residual_spectra
+
+VOCABULARY = (
+    "harmonic:theta_m:ORDER, harmonic:theta_l:ORDER, coulomb:omega_m, coulomb:omega_l, "
+    "viscous:omega_m, viscous:omega_l, hysteresis:torque, backlash:torque, stiffness:torque, "
+    "column:NAME, column:NAME*torque"
+)
+
+STOPPING_RULE = (
+    "add the best candidate selected by pysindy STLSQ only if it removes at least min_gain of "
+    "the model's cross-validated twist error (5 interleaved folds of the training data) and "
+    "lowers the held-out error in every fold; otherwise stop"
+)
+
+
+def report_dict(result: DiscoveryResult, *, extra: dict | None = None) -> dict:
+    """The JSON report (the `hdjax discover` contract plus diagnostics)."""
+    b, f = result.baseline, result.final
+    d = {
+        "baseline": {
+            "rms": b.rms, "max": b.max, "rms_pct": b.rms_pct, "max_pct": b.max_pct,
+            "twist_rms_arcsec": result.baseline_twist_rms_arcsec,
+        },
+        "steps": [
+            {
+                "effect": s.key, "rms": s.test.rms, "max": s.test.max,
+                "rms_pct": s.test.rms_pct, "max_pct": s.test.max_pct,
+                "twist_rms_arcsec": s.twist_rms_arcsec, "cv_gain": s.cv_gain,
+                "fold_gains": s.fold_gains, "term": s.term.names(), "ranking": s.ranking,
+            }
+            for s in result.steps
+        ],
+        "final": {"rms": f.rms, "max": f.max, "rms_pct": f.rms_pct, "max_pct": f.max_pct},
+        "effects": result.effects,
+        "vocabulary": VOCABULARY,
+        "stopping_rule": STOPPING_RULE,
+        "last_ranking": result.final_ranking,
+        "notes": result.notes,
+        "final_model": result.final_model.to_dict(),
+        "seconds": result.seconds,
+    }
+    if extra:
+        d.update(extra)
+    return d
+
+
+def _plot_spectra(spectra, chosen, title, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(spectra) or 1, 1, figsize=(8, 2.6 * max(1, len(spectra))))
+    axes = np.atleast_1d(axes)
+    for ax, (signal, spec) in zip(axes, spectra.items()):
+        ax.plot(spec.orders, 100 * spec.power, lw=0.8)
+        for key in chosen:
+            parts = key.split(":")
+            if parts[0] == "harmonic" and parts[1] == signal:
+                ax.axvline(float(parts[2]), color="C3", ls="--", lw=1, label=key)
+        ax.set_xlabel(f"order of {signal}")
+        ax.set_ylabel("explained variance [%]")
+        ax.legend(loc="upper right", fontsize=8) if ax.get_legend_handles_labels()[0] else None
+    axes[0].set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_residual_vs_angle(model, data, title, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..compliance._lstsq import prepare
+
+    sig, torque = prepare(model, data)
+    r = (np.asarray(sig.twist) - np.asarray(model.predict_twist(sig, torque))) * ARCSEC
+    idx = np.linspace(0, r.size - 1, min(r.size, 6000)).astype(int)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
+    for ax, name in zip(axes, ("theta_m", "theta_l")):
+        th = np.mod(np.asarray(sig.get(name))[idx], 2 * np.pi)
+        ax.plot(th, r[idx], ".", ms=1.5, alpha=0.5)
+        ax.set_xlabel(f"{name} mod 2π [rad]")
+        ax.set_ylabel("twist residual [arcsec]")
+    axes[0].set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_torque(result: DiscoveryResult, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    test = result.test
+    t = np.asarray(test.t) - float(test.t[0])
+    ref = np.asarray(test.torque)
+    final = result.steps[-1].torque_estimate if result.steps else result.baseline_estimate
+    fig, axes = plt.subplots(2, 1, figsize=(10, 5), sharex=True)
+    axes[0].plot(t, ref, "k", lw=1, label="measured")
+    axes[0].plot(t, result.baseline_estimate, lw=0.8, label="estimated, starting model")
+    axes[0].plot(t, final, lw=0.8, label="estimated, final model")
+    axes[0].set_ylabel("torque [N·m]")
+    axes[0].legend(fontsize=8)
+    axes[1].plot(t, result.baseline_estimate - ref, lw=0.6, label="starting model")
+    axes[1].plot(t, final - ref, lw=0.6, label="final model")
+    axes[1].set_ylabel("error [N·m]")
+    axes[1].set_xlabel("time [s]")
+    axes[1].legend(fontsize=8)
+    axes[0].set_title("TEST: estimated against measured torque, before and after")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_progress(result: DiscoveryResult, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    labels = ["start"] + [s.key for s in result.steps]
+    rms = [result.baseline.rms] + [s.test.rms for s in result.steps]
+    mx = [result.baseline.max] + [s.test.max for s in result.steps]
+    x = np.arange(len(labels))
+    fig, ax = plt.subplots(figsize=(max(5, 1.6 * len(labels)), 3.2))
+    ax.bar(x - 0.2, rms, 0.4, label="RMS")
+    ax.bar(x + 0.2, mx, 0.4, label="max")
+    ax.set_xticks(x, labels, rotation=15, fontsize=8)
+    ax.set_ylabel("TEST torque error [N·m]")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_figures(result: DiscoveryResult, train, folder: Path) -> list[tuple[str, str]]:
+    """All report figures into `folder`; returns (caption, file name) pairs."""
+    folder.mkdir(parents=True, exist_ok=True)
+    figs = []
+    models = [result.baseline_model] + [s.model for s in result.steps]
+    for i, m in enumerate(models):
+        nxt = result.steps[i].key if i < len(result.steps) else None
+        spectra = result.steps[i].spectra if i < len(result.steps) else result.final_spectra
+        if not spectra:
+            spectra = residual_spectra(m, train)
+        name = f"spectrum_{i}.png"
+        title = f"order spectrum of the training residual before step {i + 1}" + (
+            f" (added {nxt})" if nxt else " (nothing added)"
+        )
+        _plot_spectra(spectra, [nxt] if nxt else [], title, folder / name)
+        figs.append((title, name))
+        name = f"residual_{i}.png"
+        label = "starting model" if i == 0 else f"after {result.steps[i - 1].key}"
+        _plot_residual_vs_angle(m, result.test, f"TEST twist residual, {label}", folder / name)
+        figs.append((f"TEST twist residual against each angle, {label}", name))
+    _plot_torque(result, folder / "torque.png")
+    figs.append(("estimated against measured torque on TEST, before and after", "torque.png"))
+    _plot_progress(result, folder / "errors.png")
+    figs.append(("TEST torque error after each step", "errors.png"))
+    return figs
+
+
+def report_markdown(d: dict, figures: list[tuple[str, str]]) -> str:
+    lines = ["# hdjax discover", ""]
+    lines.append("| step | effect | TEST RMS [N·m] | TEST max [N·m] | CV gain |")
+    lines.append("|---|---|---|---|---|")
+    b = d["baseline"]
+    lines.append(f"| 0 | starting model | {b['rms']:.4g} | {b['max']:.4g} | |")
+    for i, s in enumerate(d["steps"], 1):
+        lines.append(
+            f"| {i} | `{s['effect']}` | {s['rms']:.4g} | {s['max']:.4g} | {s['cv_gain']:.1%} |"
+        )
+    lines += ["", f"Stopping rule: {d['stopping_rule']}.", ""]
+    for note in d["notes"]:
+        lines.append(f"- {note}")
+    lines.append("")
+    for caption, name in figures:
+        lines += [f"![{caption}](figures/{name})", ""]
+    return "\n".join(lines)
+
+
+def write_report(result: DiscoveryResult, out: Path, *, train=None, figures=True, extra=None):
+    """Write `report.json`, `report.md` and `figures/` into `out`, atomically.
+
+    Everything is written into a temporary folder beside `out` first; `out` (which must be
+    absent or empty) receives the files only when all of them exist, `report.json` last.
+    """
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    d = report_dict(result, extra=extra)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        figs = write_figures(result, train, tmp / "figures") if figures else []
+        (tmp / "report.md").write_text(report_markdown(d, figs))
+        (tmp / "report.json").write_text(json.dumps(d, indent=2, default=_json_default))
+        out.mkdir(exist_ok=True)
+        if (tmp / "figures").exists():
+            if (out / "figures").exists():
+                shutil.rmtree(out / "figures")
+            os.replace(tmp / "figures", out / "figures")
+        os.replace(tmp / "report.md", out / "report.md")
+        os.replace(tmp / "report.json", out / "report.json")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return d
+
+
+def _json_default(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    return str(x)
