@@ -1,9 +1,12 @@
 """The Song et al. (2019) compliance model: structure, calibration and torque inversion."""
 
 from ._inversion import (
+    SingleEstimate as SingleEstimate,
     TorqueEstimate as TorqueEstimate,
     estimate_torque as estimate_torque,
     estimate_torque_arrays as estimate_torque_arrays,
+    estimate_torque_single as estimate_torque_single,
+    torque_estimator as torque_estimator,
 )
 from ._lstsq import (
     CalibrationResult as CalibrationResult,
@@ -19,6 +22,7 @@ from ._rls import (
     rls_solve as rls_solve,
     rls_step as rls_step,
 )
+from ._segments import merge_sparse_segments as merge_sparse_segments
 from ._signals import Signals as Signals, signals_from_recording as signals_from_recording
 from ._terms import (
     Backlash as Backlash,

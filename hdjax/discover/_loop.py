@@ -27,7 +27,12 @@ from .._errors import CalibrationError, DataError, HdjaxError, InversionError
 from .._joint import Joint
 from .._metrics import ErrorMetrics, error_metrics
 from .._recording import Recording
-from ..compliance import ComplianceModel, calibrate_lstsq, estimate_torque
+from ..compliance import (
+    ComplianceModel,
+    calibrate_lstsq,
+    estimate_torque,
+    merge_sparse_segments,
+)
 from ..compliance._lstsq import _design, prepare
 from ._library import Candidate, LibraryOptions, build_library
 from ._select import cv_gains, fold_basis, sindy_select
@@ -93,22 +98,59 @@ class DiscoveryResult:
         return [s.key for s in self.steps]
 
 
-def _quiet_calibrate(model, data, notes):
+def _quiet_calibrate(model, data, notes, throw=True):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        res = calibrate_lstsq(model, data)
+        res = calibrate_lstsq(model, data, throw=throw)
     for w in caught:
         notes.append(str(w.message))
     return res
 
 
+def _merge_knot(model: ComplianceModel, j: int) -> ComplianceModel:
+    """Remove the knot between segment `j` and its neighbour towards 0 N·m."""
+    lo, hi = model.segment_bounds[j]
+    knot = lo if lo > 0.0 else hi
+    return ComplianceModel.build(
+        ratio=model.ratio, rated_torque=model.rated_torque, twist_sign=model.twist_sign,
+        knots=tuple(k for k in model.knots if k != knot), torque_range=model.torque_range,
+        velocity=model.velocity, base_terms=model.base_terms, effect_terms=model.effect_terms,
+        per_segment=model.per_segment,
+    )
+
+
+def _calibrate_monotone(model, train, notes):
+    """Calibrate; while an outer segment's compliance comes out non-positive, merge it inwards."""
+    while True:
+        res = _quiet_calibrate(model, train, notes, throw=False)
+        k = np.asarray(res.model.k)
+        act = np.asarray(res.model.active[: model.n_segments])
+        bad = [
+            j for j, (lo, hi) in enumerate(model.segment_bounds)
+            if act[j] and not k[j] > 0 and not lo <= 0.0 < hi
+        ]
+        if not bad:
+            if any(m.startswith("rank-deficient") or "not increasing" in m
+                   for m in res.messages):
+                raise CalibrationError(next(m for m in res.messages if "rank" in m
+                                            or "not increasing" in m))
+            return res
+        j = max(bad, key=lambda j: abs(sum(model.segment_bounds[j][:1])))
+        lo, hi = model.segment_bounds[j]
+        notes.append(
+            f"torque segment [{lo:.4g}, {hi:.4g}) N·m calibrated to a non-positive compliance "
+            f"({k[j]:.3g} rad/(N·m)): merged into its neighbour"
+        )
+        model = _merge_knot(model, j)
+
+
 def calibrate_baseline(train: Recording, joint: Joint, options: DiscoverOptions, notes: list):
     """The starting model (paper structure) calibrated on `train`, with documented fallbacks.
 
-    If the paper's per-segment model is rank-deficient on the data (e.g. a current that is the
-    reference torque itself, or a record that misses segments), fall back in order to shared
-    coefficients, then without the current polynomial, then without the kinematic-error term,
-    and say so in `notes`.
+    Segments the torque hardly covers, or whose compliance comes out non-positive, are merged
+    into their inner neighbour. If the model is rank-deficient on the data (e.g. a current that
+    is the reference torque itself), fall back in order to shared coefficients, then without
+    the current polynomial, then without the kinematic-error term, and say so in `notes`.
     """
     scale = options.current_scale or float(np.max(np.abs(np.asarray(train.current)))) or 1.0
     attempts = [
@@ -124,12 +166,15 @@ def calibrate_baseline(train: Recording, joint: Joint, options: DiscoverOptions,
             joint, n_segments=options.n_segments, current_scale=scale,
             kinematic="paper" if kw["fourier_order"] else "none", **kw,
         )
+        model, merged = merge_sparse_segments(model, np.asarray(train.torque))
+        trial_notes = list(merged)
         try:
-            res = _quiet_calibrate(model, train, notes)
+            res = _calibrate_monotone(model, train, trial_notes)
         except (CalibrationError, InversionError) as err:
             last = err
             notes.append(f"starting model {kw} not calibrated: {err}")
             continue
+        notes.extend(trial_notes)
         if i:
             notes.append(f"starting model fell back to {kw}")
         return res.model
