@@ -32,10 +32,71 @@ from ._signals import Signals
 
 TORQUE_KINDS = ("none", "linear", "memoryless", "path")
 
+TORQUE_PATH = "_torque_path"
+"""Name of an optional signal that drives path-dependent terms at calibration (see
+[`Hysteresis`][]): the torque *estimated* by a previous model, so the state is computed as the
+estimator will compute it, causally and without the reference sensor."""
+
 
 def _fmt(order: float) -> str:
     """An order as a short decimal string (`2`, `1.98`, `0.5`)."""
     return f"{order:.10g}"
+
+
+# fdlibm's split of pi/2 (33 + 33 + 53 bits) and its sin/cos kernels on [-pi/4, pi/4].
+_PIO2 = (1.57079632673412561417e00, 6.07710050630396597660e-11, 2.02226624879595063154e-21)
+_SIN = (
+    -1.66666666666666324348e-01,
+    8.33333333332248946124e-03,
+    -1.98412698298579493134e-04,
+    2.75573137070700676789e-06,
+    -2.50507602534068634195e-08,
+    1.58969099521155010221e-10,
+)
+_COS = (
+    4.16666666666666019037e-02,
+    -1.38888888888741095749e-03,
+    2.48015872894767294178e-05,
+    -2.75573143513906633035e-07,
+    2.08757232129817482790e-09,
+    -1.13596475577881948265e-11,
+)
+
+
+def sincos(x):
+    r"""$(\sin x, \cos x)$ from elementwise arithmetic only (float64, |x| < 1e6).
+
+    Cody-Waite reduction by $\pi/2$ and fdlibm's minimax kernels (error ~1e-16 relative to
+    |x|). Unlike `jnp.sin`/`jnp.cos` it fuses into the surrounding XLA loop and shares the
+    reduction between the two, which makes the paper-form Fourier terms several times cheaper.
+    """
+    k = jnp.round(x * (2.0 / math.pi))
+    r = ((x - k * _PIO2[0]) - k * _PIO2[1]) - k * _PIO2[2]
+    z = r * r
+    ps = _SIN[5]
+    for c in _SIN[4::-1]:
+        ps = c + z * ps
+    pc = _COS[5]
+    for c in _COS[4::-1]:
+        pc = c + z * pc
+    s = r + r * z * ps
+    co = 1.0 - 0.5 * z + z * z * pc
+    q = k - 4.0 * jnp.floor(k * 0.25)  # quadrant 0..3
+    sin = jnp.where(q == 0.0, s, jnp.where(q == 1.0, co, jnp.where(q == 2.0, -s, -co)))
+    cos = jnp.where(q == 0.0, co, jnp.where(q == 1.0, -s, jnp.where(q == 2.0, -co, s)))
+    return sin, cos
+
+
+def harmonic_pairs(u, order: int):
+    r"""$[(\cos nu, \sin nu)]_{n=1..order}$ by the angle-addition recurrence from one `sincos`."""
+    # The barrier materialises sin/cos once: without it XLA fuses (and so recomputes) them into
+    # every column that a stacked design materialises separately.
+    s1, c1 = jax.lax.optimization_barrier(sincos(u))
+    out = [(c1, s1)]
+    for _ in range(1, order):
+        c, s = out[-1]
+        out.append((c * c1 - s * s1, s * c1 + c * s1))
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -47,6 +108,9 @@ class Constant:
 
     def names(self) -> tuple[str, ...]:
         return ("k0",)
+
+    def column_list(self, sig: Signals) -> list:
+        return [jnp.ones((sig.n_samples,), jnp.float64)]
 
     def columns(self, sig: Signals, torque=None):
         return jnp.ones((sig.n_samples, 1), jnp.float64)
@@ -68,9 +132,15 @@ class CurrentPolynomial:
     def names(self) -> tuple[str, ...]:
         return tuple(f"w{i}" for i in range(1, self.order + 1))
 
-    def columns(self, sig: Signals, torque=None):
+    def column_list(self, sig: Signals) -> list:
         x = sig.current / self.scale
-        return jnp.stack([x**i for i in range(1, self.order + 1)], axis=1)
+        out = [x]
+        for _ in range(1, self.order):
+            out.append(out[-1] * x)
+        return out
+
+    def columns(self, sig: Signals, torque=None):
+        return jnp.stack(self.column_list(sig), axis=1)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,13 +163,16 @@ class PaperFourier:
             out += [f"a{n}", f"b{n}", f"c{n}", f"d{n}"]
         return tuple(out)
 
-    def columns(self, sig: Signals, torque=None):
-        ul = sig.theta_l * sig.omega_l
-        um = sig.theta_m * sig.omega_m
+    def column_list(self, sig: Signals) -> list:
+        hl = harmonic_pairs(sig.theta_l * sig.omega_l, self.order)
+        hm = harmonic_pairs(sig.theta_m * sig.omega_m, self.order)
         cols = []
-        for n in range(1, self.order + 1):
-            cols += [jnp.cos(n * ul), jnp.sin(n * ul), jnp.cos(n * um), jnp.sin(n * um)]
-        return jnp.stack(cols, axis=1)
+        for (cl, sl), (cm, sm) in zip(hl, hm):
+            cols += [cl, sl, cm, sm]
+        return cols
+
+    def columns(self, sig: Signals, torque=None):
+        return jnp.stack(self.column_list(sig), axis=1)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -121,12 +194,16 @@ class Harmonics:
             out += [f"cos({_fmt(k)}*{self.signal})", f"sin({_fmt(k)}*{self.signal})"]
         return tuple(out)
 
-    def columns(self, sig: Signals, torque=None):
+    def column_list(self, sig: Signals) -> list:
         theta = sig.get(self.signal)
         cols = []
         for k in self.orders:
-            cols += [jnp.cos(k * theta), jnp.sin(k * theta)]
-        return jnp.stack(cols, axis=1)
+            s, c = sincos(k * theta)
+            cols += [c, s]
+        return cols
+
+    def columns(self, sig: Signals, torque=None):
+        return jnp.stack(self.column_list(sig), axis=1)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -224,7 +301,7 @@ class Stiffening:
     """Nonlinear stiffness beyond the piecewise segments: $(T/\\tau_s)^3$ (odd, smooth)."""
 
     torque_scale: float = 1.0
-    key: str = "stiffness:cubic"
+    key: str = "stiffness:torque"
     torque_kind: str = "memoryless"
 
     def names(self) -> tuple[str, ...]:
@@ -260,8 +337,9 @@ class Backlash:
 def dahl_state(torque, torque_scale: float):
     """Causal Dahl-type hysteresis state driven by a torque path.
 
-    $z_k = z_{k-1} + \\frac{\\Delta T_k}{T_h} (1 - z_{k-1}\\,\\mathrm{sgn}\\,\\Delta T_k)$, clipped to
-    $[-1, 1]$: the rate-independent Dahl model ($\\sigma = 1$) with the torque as its input, so
+    $z_k = z_{k-1} + \\frac{\\Delta T_k}{T_h} (1 - z_{k-1}\\,\\mathrm{sgn}\\,\\Delta T_k)$,
+    clipped to $[-1, 1]$: the rate-independent Dahl model ($\\sigma = 1$) with the torque as its
+    input, so
     $z$ saturates at $\\pm 1$ after a torque reversal of a few $T_h$ (the loop of Song et al.
     Fig. 2, B to B'). Starts at $z_0 = 0$.
     """
@@ -281,8 +359,10 @@ def dahl_state(torque, torque_scale: float):
 class Hysteresis:
     """Hysteresis in twist as a Dahl state driven by the torque path ([`dahl_state`][]).
 
-    At calibration the state is driven by the reference torque; at estimation by the torque
-    being estimated (fixed-point iteration, causal), never by the reference sensor.
+    At estimation the state is driven by the torque being estimated (fixed-point iteration,
+    causal), never by the reference sensor. At calibration it is driven by the signal
+    `TORQUE_PATH` when present (the residual loop supplies the previous model's estimate), else
+    by the reference torque.
     """
 
     torque_scale: float = 1.0
@@ -293,7 +373,10 @@ class Hysteresis:
         return (f"dahl(T/{_fmt(self.torque_scale)})",)
 
     def columns(self, sig: Signals, torque):
-        return dahl_state(torque, self.torque_scale)[:, None]
+        # A torque path supplied with the signals (the estimate of a previous model, so that
+        # calibration sees the state the estimator will see) takes precedence.
+        driver = sig.extras.get(TORQUE_PATH, torque)
+        return dahl_state(driver, self.torque_scale)[:, None]
 
 
 TERM_TYPES = (

@@ -22,12 +22,16 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
         "add it, refit, and report the torque error on TEST before and after. Example: hdjax "
         "discover --train train.csv --test test.csv --joint joint.toml --out runs/discover"
     )
-    p.add_argument("--train", required=True, type=Path,
+    p.add_argument("--train", type=Path,
                    help="training recording (CSV: t, theta_m, theta_l, current, torque [+ extras])")
-    p.add_argument("--test", required=True, type=Path,
+    p.add_argument("--test", type=Path,
                    help="test recording, same columns; used for reporting only, never to select")
-    p.add_argument("--joint", required=True, type=Path,
+    p.add_argument("--joint", type=Path,
                    help="TOML file with a [joint] table (ratio, rated_torque, optional twist_sign)")
+    p.add_argument("--config", type=Path,
+                   help="instead of --train/--test/--joint: a discover experiment TOML with "
+                   "[joint], [data] (files, column map) and [discover] tables, e.g. "
+                   "experiments/lara8_discover.toml")
     p.add_argument("--out", required=True, type=Path,
                    help="output folder (absent or empty unless --overwrite) for report.json, "
                    "report.md and figures/")
@@ -60,16 +64,33 @@ def run(args: argparse.Namespace) -> int:
         raise DataError(f"--max-effects must be >= 0, got {args.max_effects}")
     if not 0.0 < args.min_gain < 1.0:
         raise DataError(f"--min-gain must lie in (0, 1), got {args.min_gain}")
-    joint = hdjax.load_joint(args.joint)
+    cfg_notes, cfg = [], {}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        train = hdjax.load_csv(args.train)
-        test = hdjax.load_csv(args.test)
+        if args.config is not None:
+            if args.train or args.test or args.joint:
+                raise DataError("give either --config or --train/--test/--joint, not both")
+            from ._config import load_discover_config
+
+            train, test, joint, cfg, cfg_notes = load_discover_config(args.config)
+        else:
+            missing = [f"--{k}" for k in ("train", "test", "joint") if getattr(args, k) is None]
+            if missing:
+                raise DataError(f"missing {', '.join(missing)} (or give --config)")
+            joint = hdjax.load_joint(args.joint)
+            train = hdjax.load_csv(args.train)
+            test = hdjax.load_csv(args.test)
     say = (lambda s: None) if args.quiet else (lambda s: print(f"[discover] {s}", file=sys.stderr))
     for w in caught:
         say(f"warning: {w.message}")
-    options = DiscoverOptions(max_effects=args.max_effects, min_gain=args.min_gain)
-    ignore = tuple(args.ignore_column)
+    options = DiscoverOptions(
+        max_effects=int(cfg.get("max_effects", args.max_effects)),
+        min_gain=float(cfg.get("min_gain", args.min_gain)),
+        n_segments=int(cfg.get("n_segments", 5)),
+        poly_order=int(cfg.get("poly_order", 6)),
+        fourier_order=int(cfg.get("fourier_order", 3)),
+    )
+    ignore = tuple(args.ignore_column) + tuple(cfg.get("ignore_columns", ()))
     notes = check_inputs(
         train, test, joint, min_order_m=options.library.orders_m[0], ignore_columns=ignore
     )
@@ -81,11 +102,12 @@ def run(args: argparse.Namespace) -> int:
         )
         train, test = drop(train), drop(test)
     result = discover(train, test, joint, options, progress=say)
-    result.notes[:0] = notes + [f"input warning: {w.message}" for w in caught]
+    result.notes[:0] = cfg_notes + notes + [f"input warning: {w.message}" for w in caught]
     say("writing report" + ("" if args.no_figures else " and figures"))
     write_report(
         result, out, train=train, figures=not args.no_figures,
-        extra={"train": str(args.train), "test": str(args.test), "joint": joint.to_dict(),
+        extra={"train": train.source, "test": test.source, "joint": joint.to_dict(),
+               "config": None if args.config is None else str(args.config),
                "version": hdjax.__version__},
     )
     say(f"done in {result.seconds:.1f} s: effects {result.effects or 'none'}; TEST torque RMS "

@@ -7,9 +7,10 @@
 3. Select with sparse regression (pysindy STLSQ on the library made orthogonal to the model)
    and rank the selected candidates by their cross-validated explained variance of the
    residual, *within the training data only*.
-4. **Stopping rule.** Add the best candidate only if it removes at least `min_gain` (default
-   2 %) of the model's cross-validated twist error *and* lowers the held-out error in every
-   fold; otherwise stop. Also stop after `max_effects` effects.
+4. **Stopping rule.** Add the best-ranked selected candidate that removes at least `min_gain`
+   (default 2 %) of the model's cross-validated twist error *and* lowers the held-out error in
+   every fold (a candidate that helps on average but hurts some fold is fitting a coincidence
+   of part of the record). Stop when no candidate qualifies, or after `max_effects` effects.
 5. Refit by least squares with the new columns, re-estimate torque on the test recording by
    inversion (eqs. (26)-(27)) and record the errors. The test recording is never used to choose.
 """
@@ -21,6 +22,7 @@ import time
 import warnings
 from collections.abc import Callable
 
+import equinox as eqx
 import numpy as np
 
 from .._errors import CalibrationError, DataError, HdjaxError, InversionError
@@ -34,6 +36,7 @@ from ..compliance import (
     merge_sparse_segments,
 )
 from ..compliance._lstsq import _design, prepare
+from ..compliance._terms import TORQUE_PATH
 from ._library import Candidate, LibraryOptions, build_library
 from ._select import cv_gains, fold_basis, sindy_select
 from ._spectrum import OrderSpectrum, order_spectrum
@@ -153,13 +156,16 @@ def calibrate_baseline(train: Recording, joint: Joint, options: DiscoverOptions,
     the current polynomial, then without the kinematic-error term, and say so in `notes`.
     """
     scale = options.current_scale or float(np.max(np.abs(np.asarray(train.current)))) or 1.0
-    attempts = [
+    attempts = []
+    for kw in (
         dict(per_segment=options.per_segment, poly_order=options.poly_order,
              fourier_order=options.fourier_order),
         dict(per_segment=False, poly_order=options.poly_order, fourier_order=options.fourier_order),
         dict(per_segment=False, poly_order=0, fourier_order=options.fourier_order),
         dict(per_segment=False, poly_order=0, fourier_order=0),
-    ]
+    ):
+        if kw not in attempts:
+            attempts.append(kw)
     last = None
     for i, kw in enumerate(attempts):
         model = ComplianceModel.paper(
@@ -199,9 +205,20 @@ def _usable_columns(train: Recording) -> tuple[str, ...]:
     )
 
 
+def training_data(model: ComplianceModel, train: Recording):
+    """Training signals and reference torque, with the present model's torque *estimate* as the
+    driver of path-dependent candidates (hysteresis is computed from the torque being
+    estimated, causally, never from the reference sensor)."""
+    sig, torque = prepare(model, train)
+    t_est = estimate_torque(model, sig).torque
+    extras = dict(sig.extras)
+    extras[TORQUE_PATH] = t_est
+    return eqx.tree_at(lambda s: s.extras, sig, extras), torque
+
+
 def score_candidates(model, train, options: DiscoverOptions, extra_columns):
     """Library, spectra, and per-candidate (gain, fold gains, sindy-selected) for one step."""
-    sig, torque = prepare(model, train)
+    sig, torque = training_data(model, train)
     a_full = np.asarray(_design(model, sig, torque))
     active = np.asarray(model.active)
     a = a_full[:, active]
@@ -286,13 +303,14 @@ def discover(
         if len(steps) >= options.max_effects:
             notes.append(f"stopped: reached max_effects = {options.max_effects}")
             break
-        chosen = None
-        for cand, gain, folds, sel in ranked:
-            if not sel:
-                continue
-            if gain >= options.min_gain and np.all(folds > 0):
-                chosen = (cand, gain, folds)
-            break
+        chosen = next(
+            (
+                (cand, gain, folds)
+                for cand, gain, folds, sel in ranked
+                if sel and gain >= options.min_gain and np.all(folds > 0)
+            ),
+            None,
+        )
         if chosen is None:
             notes.append(
                 "stopped: no candidate selected by the sparse regression removes at least "
@@ -301,7 +319,8 @@ def discover(
             break
         cand, gain, folds = chosen
         try:
-            new_model = _quiet_calibrate(model.with_effects(cand.term), train, notes).model
+            data = training_data(model, train) if cand.term.torque_kind == "path" else train
+            new_model = _quiet_calibrate(model.with_effects(cand.term), data, notes).model
             metrics, est = _test_errors(new_model, test, joint.rated_torque)
         except (CalibrationError, InversionError) as err:
             notes.append(f"candidate {cand.key} could not be added: {err}")

@@ -19,9 +19,9 @@ VOCABULARY = (
 )
 
 STOPPING_RULE = (
-    "add the best candidate selected by pysindy STLSQ only if it removes at least min_gain of "
+    "add the best-ranked candidate selected by pysindy STLSQ that removes at least min_gain of "
     "the model's cross-validated twist error (5 interleaved folds of the training data) and "
-    "lowers the held-out error in every fold; otherwise stop"
+    "lowers the held-out error in every fold; stop when none qualifies"
 )
 
 

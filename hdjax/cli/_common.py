@@ -1,0 +1,99 @@
+"""Shared pieces of the command line: the parser, progress lines, overrides."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from .._errors import ConfigError
+from .._io import did_you_mean
+
+
+class UsageError(Exception):
+    """A command-line usage problem (exit code 2, one line on stderr)."""
+
+
+class ParserExit(Exception):
+    """`--help` (or `--version`) was answered; carries the exit status."""
+
+    def __init__(self, status: int = 0):
+        super().__init__(status)
+        self.status = status
+
+
+class Parser(argparse.ArgumentParser):
+    """An `ArgumentParser` that raises [`UsageError`][] instead of exiting, and answers an
+    unknown option with "did you mean"."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", argparse.RawDescriptionHelpFormatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message):
+        raise UsageError(f"{self.prog}: {message}")
+
+    def exit(self, status=0, message=None):
+        if message:
+            print(message, file=sys.stderr, end="")
+        raise ParserExit(status)
+
+    def option_names(self) -> list[str]:
+        return [s for a in self._actions for s in a.option_strings if s.startswith("--")]
+
+    def parse_strict(self, argv: list[str]) -> argparse.Namespace:
+        """Parse, refusing unknown options with a "did you mean" answer."""
+        args, extra = self.parse_known_args(argv)
+        if extra:
+            bad = extra[0]
+            name = bad.split("=", 1)[0]
+            if name.startswith("-"):
+                hint = did_you_mean(name, self.option_names())
+                raise UsageError(
+                    f"{self.prog}: unknown option {name!r}{hint}; see '{self.prog} --help'"
+                )
+            raise UsageError(f"{self.prog}: unexpected argument {bad!r}; see '{self.prog} --help'")
+        return args
+
+
+class Progress:
+    """Progress lines on stderr (`[  1.2s] message`), silent with `quiet`."""
+
+    def __init__(self, quiet: bool = False, stream=None):
+        self.quiet = quiet
+        self.stream = stream
+        self.t0 = time.perf_counter()
+
+    def __call__(self, message: str) -> None:
+        if self.quiet:
+            return
+        stream = self.stream or sys.stderr
+        print(f"[{time.perf_counter() - self.t0:6.1f}s] {message}", file=stream, flush=True)
+
+    def warn(self, message: str) -> None:
+        stream = self.stream or sys.stderr
+        print(f"hdjax: warning: {' '.join(str(message).split())}", file=stream, flush=True)
+
+
+def parse_overrides(items: list[str] | None) -> dict:
+    """`["model.poly_order=4", ...]` -> `{"model.poly_order": 4}` (values read as TOML)."""
+    from ..config import parse_value
+
+    out = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--set expects KEY=VALUE (e.g. model.poly_order=4), got {item!r}")
+        out[key.strip()] = parse_value(value.strip())
+    return out
+
+
+def add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--set",
+        metavar="KEY=VALUE",
+        action="append",
+        help="change one setting of the config, e.g. --set model.poly_order=4 (repeatable; "
+        'values are TOML: 4, 1.5, true, [20, 20], "text")',
+    )
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress lines on stderr")

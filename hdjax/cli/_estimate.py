@@ -1,0 +1,113 @@
+"""`hdjax estimate`: apply a saved model to a new recording."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+HELP = "estimate torque on a new recording with a saved model (CSV in, CSV out)"
+EXAMPLE = """\
+example:
+  hdjax estimate --model runs/song2019/model.json --data new.csv --out torque.csv
+  hdjax estimate --model M.json --data log.csv --columns lara8.toml --joint lara8.toml --out E.csv
+
+The output CSV has the columns t, torque_estimate and (model method) in_range; when the data has
+a reference torque, torque_measured is added and the RMS / maximum error go to stderr.
+"""
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("estimate", help=HELP, description=HELP, epilog=EXAMPLE)
+    p.add_argument(
+        "--model", required=True, help="a model file written by 'hdjax run' (model.json)"
+    )
+    p.add_argument("--data", required=True, help="the recording (.csv or .npz)")
+    p.add_argument("--out", required=True, help="where to write the estimate (.csv)")
+    p.add_argument(
+        "--method",
+        choices=("model", "network"),
+        default="model",
+        help="which estimator of the file to use (default: the compliance model)",
+    )
+    p.add_argument(
+        "--columns",
+        help="TOML file whose [data] table maps the file's columns (columns/extras, as in an "
+        "experiment config); default: the file has t, theta_m, theta_l, current in SI units",
+    )
+    p.add_argument(
+        "--joint",
+        help="TOML file with the data's [joint] table; refused if its ratio differs from the "
+        "model's",
+    )
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress lines on stderr")
+
+
+def command(args, parser) -> int:
+    import io
+
+    import numpy as np
+
+    from .._errors import ConfigError, ModelMismatchError
+    from .._io import ColumnMap, atomic_write_bytes, load_recording
+    from .._joint import load_joint
+    from .._metrics import error_metrics
+    from ..config import check_compatible, load_model, parse_toml
+    from ._common import Progress
+
+    progress = Progress(args.quiet)
+    out = Path(args.out)
+    if out.exists() and not args.overwrite:
+        raise ConfigError(f"output file {out} already exists; pass --overwrite to replace it")
+    saved = load_model(args.model)
+    cmap = None
+    if args.columns:
+        cpath = Path(args.columns)
+        if not cpath.exists():
+            raise ConfigError(f"{cpath}: no such column-map file")
+        doc = parse_toml(cpath.read_text(), where=str(cpath))
+        table = doc.get("data", doc)
+        table = {k: v for k, v in table.items() if k in ("columns", "extras")}
+        cmap = ColumnMap.from_dict(table, where=f"{cpath} [data]")
+    joint = load_joint(args.joint) if args.joint else None
+    rec = load_recording(args.data, cmap)
+    check_compatible(saved, rec, joint)
+    progress(f"estimating {rec.n_samples} samples with the {args.method} of {args.model}")
+    cols = {"t": np.asarray(rec.t)}
+    if args.method == "network":
+        if saved.network is None:
+            raise ModelMismatchError(f"{args.model}: holds no network; use --method model")
+        from ..network import estimate_torque as net_estimate
+
+        cols["torque_estimate"] = np.asarray(net_estimate(saved.network, rec, saved.joint))
+    else:
+        if saved.compliance is None:
+            raise ModelMismatchError(
+                f"{args.model}: holds no compliance model; use --method network"
+            )
+        from ..compliance import estimate_torque
+
+        est = estimate_torque(saved.compliance, rec)
+        cols["torque_estimate"] = np.asarray(est.torque)
+        cols["in_range"] = np.asarray(est.in_range).astype(np.float64)
+    if rec.torque is not None:
+        cols["torque_measured"] = np.asarray(rec.torque)
+        m = error_metrics(
+            cols["torque_estimate"], cols["torque_measured"], saved.joint.rated_torque
+        )
+        progress(
+            f"error against the measured torque: RMS {m.rms:.4g} N·m, max {m.max:.4g} N·m "
+            f"({m.max_pct:.3g} % of rated)"
+        )
+    buf = io.StringIO()
+    names = list(cols)
+    np.savetxt(
+        buf,
+        np.column_stack([cols[k] for k in names]),
+        delimiter=",",
+        header=",".join(names),
+        comments="",
+        fmt="%.17g",
+    )
+    atomic_write_bytes(out, buf.getvalue().encode())
+    progress(f"wrote {out}")
+    return 0

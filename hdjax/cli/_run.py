@@ -1,0 +1,309 @@
+"""`hdjax run CONFIG`: calibrate, estimate, score and report one experiment."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+HELP = "run an experiment config: calibrate, estimate, score, write figures and a report"
+EXAMPLE = """\
+example:
+  hdjax run experiments/song2019.toml --out runs/song2019 --overwrite
+  hdjax run experiments/synthetic.toml --set model.poly_order=3 --out runs/p3
+
+writes OUT/metrics.json, OUT/report.md, OUT/figures/*.png, OUT/config.resolved.toml and
+OUT/model.json (the calibrated model, for 'hdjax estimate'); OUT appears only when complete.
+"""
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("run", help=HELP, description=HELP, epilog=EXAMPLE)
+    p.add_argument("config", help="experiment file (TOML), e.g. experiments/song2019.toml")
+    p.add_argument(
+        "--out",
+        help="result directory (default runs/NAME with NAME from [experiment] name); refused if "
+        "it exists, unless --overwrite",
+    )
+    p.add_argument("--overwrite", action="store_true", help="replace an existing result directory")
+    p.add_argument("--no-figures", action="store_true", help="skip the figures (faster)")
+    p.add_argument("--no-network", action="store_true", help="skip the network method")
+    from ._common import add_common
+
+    add_common(p)
+
+
+def command(args, parser) -> int:
+    from ..config import load_experiment
+    from ..report import ResultDir
+    from ._common import Progress, parse_overrides
+
+    progress = Progress(args.quiet)
+    overrides = parse_overrides(args.set)
+    if args.no_figures:
+        overrides["outputs.figures"] = False
+    if args.no_network:
+        overrides["network.enabled"] = False
+    exp = load_experiment(args.config, overrides)
+    out = Path(args.out) if args.out else Path("runs") / exp["experiment"]["name"]
+    with ResultDir(out, overwrite=args.overwrite) as rd:
+        summary = run_experiment(exp, rd, progress)
+    progress(f"wrote {out}")
+    print(summary)
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def run_experiment(exp, rd, progress) -> str:
+    """Carry out an experiment into a [`hdjax.report.ResultDir`][]; returns a text summary."""
+    import numpy as np
+
+    from ..config import _pipeline as P, build_dataset, dumps_toml, save_model
+    from ..report import environment
+
+    t_start = time.perf_counter()
+    cfg = exp
+    seed = cfg["experiment"]["seed"]
+    ds = build_dataset(exp, progress)
+    joint = ds.joint
+    rated = joint.rated_torque
+    outputs = cfg["outputs"]
+    metrics: dict = {
+        "experiment": cfg["experiment"]["name"],
+        "environment": environment(seed),
+        "data": {"provenance": ds.provenance, "n_train": ds.n_train},
+    }
+
+    # -- the model-based method --------------------------------------------------------------
+    progress(f"calibrating the compliance model on {ds.n_train} samples ({cfg['fit']['method']})")
+    scale = P.current_scale(cfg, ds.train)
+    model0 = P.build_model(cfg, joint, scale)
+    t0 = time.perf_counter()
+    cal = P.calibrate(cfg, model0, ds.train, warn=progress.warn)
+    fit_s = time.perf_counter() - t0
+    for msg in cal.messages:
+        progress.warn(msg)
+    progress("estimating torque with the model (eqs. 26-27)")
+    est_m = P.estimate_model(cal.model, ds.test)
+    metrics["model"] = {
+        "calibration": {
+            "method": cfg["fit"]["method"],
+            "n_terms": cal.n_terms,
+            "rank": cal.rank,
+            "condition": cal.condition,
+            "residual_rms_arcsec": cal.residual_rms * 648000.0 / np.pi,
+            "segment_counts": list(cal.segment_counts),
+            "dropped": list(cal.dropped),
+            "messages": list(cal.messages),
+            "current_scale": scale,
+            "fit_s": fit_s,
+        },
+        "scenarios": P.metrics_of(est_m, ds.test, rated),
+    }
+    first_test = next(iter(ds.test.values()))
+    if outputs["timing"]:
+        from ..compliance import estimate_torque
+
+        metrics["model"]["timing"] = P.time_per_100(
+            lambda r: estimate_torque(cal.model, r).torque, first_test, outputs["timing_repeats"]
+        )
+
+    # -- the network method ------------------------------------------------------------------
+    net, est_n = None, None
+    why = "" if cfg["network"]["enabled"] else "disabled in [network] (enabled = false)"
+    why = why or P.network_available()
+    if why:
+        progress(f"network method skipped: {why}")
+        metrics["network"] = {"available": False, "reason": why}
+    else:
+        n_cfg = cfg["network"]
+        progress(
+            f"training the BP network {n_cfg['hidden']} ({n_cfg['trainer']}, {n_cfg['steps']} "
+            f"steps, at most {n_cfg['max_train_samples']} samples)"
+        )
+        net, info = P.train_network(cfg, joint, ds.train, seed)
+        est_n = P.estimate_network(net, joint, ds.test)
+        metrics["network"] = {
+            "available": True,
+            "training": info,
+            "scenarios": P.metrics_of(est_n, ds.test, rated),
+        }
+        if outputs["timing"]:
+            from ..network import estimate_torque as net_estimate
+
+            metrics["network"]["timing"] = P.time_per_100(
+                lambda r: net_estimate(net, r, joint), first_test, outputs["timing_repeats"]
+            )
+    if outputs["paper_reference"]:
+        metrics["paper"] = {
+            "errors_max_rms_Nm": {
+                m: {s: list(v) for s, v in d.items()} for m, d in P.PAPER_ERRORS.items()
+            },
+            "ms_per_100": P.PAPER_MS_PER_100,
+            "rated_torque": 400.0,
+            "source": "Song et al. 2019, Section IV.B and Figs. 9-17",
+        }
+
+    # -- figures -----------------------------------------------------------------------------
+    figures: list[tuple[str, str]] = []
+    if outputs["figures"]:
+        from ..report import error_rate_figure, torque_figure
+
+        progress("drawing figures")
+        for method, est in (("model", est_m), ("network", est_n)):
+            if est is None:
+                continue
+            for name, rec in ds.test.items():
+                e = est[name]
+                torque = e.torque if hasattr(e, "torque") else e
+                label = "model-based method" if method == "model" else "BP network"
+                rel = f"figures/{method}_{name}.png"
+                rd.write_bytes(
+                    rel,
+                    torque_figure(
+                        np.asarray(rec.t),
+                        np.asarray(rec.column("torque")),
+                        np.asarray(torque),
+                        title=f"{label}, {name}: estimated vs measured torque",
+                        rated=rated,
+                    ),
+                )
+                figures.append((rel, f"{label}, {name}"))
+        rates = {"model": metrics["model"]["scenarios"]}
+        rates["network"] = metrics["network"].get("scenarios")
+        paper = P.PAPER_ERRORS if outputs["paper_reference"] else None
+        rd.write_bytes("figures/error_rate.png", error_rate_figure(rates, paper=paper, rated=rated))
+        figures.append(("figures/error_rate.png", "error rate, both methods (cf. Fig. 17)"))
+
+    # -- files -------------------------------------------------------------------------------
+    if outputs["save_model"]:
+        save_model(
+            rd.path("model.json"),
+            joint,
+            compliance=cal.model,
+            network=net,
+            meta={"experiment": cfg["experiment"]["name"], "seed": seed, "data": ds.provenance},
+        )
+        rd.files.append("model.json")
+    metrics["wall_s"] = time.perf_counter() - t_start
+    header = (
+        f"Resolved configuration of experiment {cfg['experiment']['name']!r} "
+        f"(hdjax {metrics['environment']['hdjax_version']}, seed {seed}).\n"
+        f"Source: {exp.path}\nRe-run: hdjax run config.resolved.toml --out OTHER"
+    )
+    rd.write_text("config.resolved.toml", dumps_toml(dict(cfg), header=header))
+    report = render_report(cfg, metrics, figures)
+    rd.write_text("report.md", report)
+    rd.write_json("metrics.json", metrics)
+    return summary_text(metrics)
+
+
+def _row(metrics: dict, method: str, scenario: str):
+    d = metrics.get(method, {}).get("scenarios") or {}
+    m = d.get(scenario)
+    return (None, None, None) if m is None else (m["max"], m["rms"], m["max_pct"])
+
+
+def render_report(cfg: dict, metrics: dict, figures: list[tuple[str, str]]) -> str:
+    """The `report.md` of a run: what ran, the error table (with the paper's), figures."""
+    from ..config import _pipeline as P
+    from ..report import markdown_table
+
+    env = metrics["environment"]
+    lines = [
+        f"# {cfg['experiment']['name']}",
+        "",
+        cfg["experiment"]["description"] or "",
+        "",
+        f"hdjax {env['hdjax_version']}, JAX {env['jax_version']} ({env['backend']}, "
+        f"{env['precision']}), seed {env['seed']}, {env['cpu_count']} CPUs; wall time "
+        f"{metrics['wall_s']:.1f} s. Resolved configuration: `config.resolved.toml`.",
+        "",
+        "## Data",
+        "",
+    ]
+    lines += [f"- {p}" for p in metrics["data"]["provenance"]]
+    scenarios = list(metrics["model"]["scenarios"])
+    paper = metrics.get("paper")
+    header = ["experiment", "model max", "model RMS", "network max", "network RMS"]
+    if paper:
+        header += ["paper model max/RMS", "paper network max/RMS"]
+    rows = []
+    for s in scenarios:
+        mm, mr, _ = _row(metrics, "model", s)
+        nm, nr, _ = _row(metrics, "network", s)
+        row = [s, mm, mr, nm, nr]
+        if paper:
+            pm = P.PAPER_ERRORS["model"].get(s)
+            pn = P.PAPER_ERRORS["network"].get(s)
+            row += [
+                f"{pm[0]:g} / {pm[1]:g}" if pm else "n/a",
+                f"{pn[0]:g} / {pn[1]:g}" if pn else "n/a",
+            ]
+        rows.append(row)
+    lines += ["", "## Torque error [N·m] on the test recordings", "", markdown_table(header, rows)]
+    lines += [
+        "",
+        "Errors are estimate minus reference over every test sample (the paper's definition); "
+        "% of rated torque is in `metrics.json` (`max_pct`, `rms_pct`).",
+    ]
+    net = metrics.get("network", {})
+    if not net.get("available", False):
+        lines += ["", f"Network method: not available ({net.get('reason', '')})."]
+    cal = metrics["model"]["calibration"]
+    lines += [
+        "",
+        "## Calibration",
+        "",
+        f"{cal['method']} on {metrics['data']['n_train']} samples: {cal['n_terms']} terms, rank "
+        f"{cal['rank']}, condition number {cal['condition']:.3g}, twist residual "
+        f"{cal['residual_rms_arcsec']:.3g} arcsec RMS, {cal['fit_s']:.2f} s.",
+    ]
+    for msg in cal["dropped"] + cal["messages"]:
+        lines.append(f"- {msg}")
+    if "timing" in metrics["model"]:
+        rows = []
+        for method in ("model", "network"):
+            t = metrics.get(method, {}).get("timing")
+            paper_ms = P.PAPER_MS_PER_100[method] if paper else None
+            if t:
+                ratio = paper_ms / t["ms_per_100"] if paper_ms else None
+                rows.append([method, t["ms_per_100"], t["first_call_ms"], paper_ms, ratio])
+            else:
+                rows.append([method, None, None, paper_ms, None])
+        lines += [
+            "",
+            "## Time to estimate 100 samples",
+            "",
+            markdown_table(
+                [
+                    "method",
+                    "ms per 100 (steady)",
+                    "first call incl. compile [ms]",
+                    "paper [ms]",
+                    "speed-up",
+                ],
+                rows,
+            ),
+            "",
+            "One call from Python on 100 samples (signals, checks and the jitted estimate), best "
+            "of the repeats; the paper's numbers are from an i7-7700H.",
+        ]
+    if figures:
+        lines += ["", "## Figures", ""]
+        for rel, caption in figures:
+            lines += [f"### {caption}", "", f"![{caption}]({rel})", ""]
+    return "\n".join(lines) + "\n"
+
+
+def summary_text(metrics: dict) -> str:
+    """A few lines for stdout: error per method and scenario."""
+    lines = [f"{'experiment':<12}{'model max':>12}{'model RMS':>12}{'net max':>12}{'net RMS':>12}"]
+    for s in metrics["model"]["scenarios"]:
+        mm, mr, _ = _row(metrics, "model", s)
+        nm, nr, _ = _row(metrics, "network", s)
+        f = lambda v: f"{v:12.4g}" if v is not None else f"{'n/a':>12}"
+        lines.append(f"{s:<12}{f(mm)}{f(mr)}{f(nm)}{f(nr)}")
+    lines.append(f"(N·m; wall time {metrics['wall_s']:.1f} s)")
+    return "\n".join(lines)

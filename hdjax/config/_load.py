@@ -1,0 +1,136 @@
+"""Reading experiment files (with line:column on parse errors) and writing resolved ones."""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+
+from .._errors import ConfigError
+from ._schema import apply_setting, resolve
+
+_POSITION = re.compile(r"^(?P<msg>.*?)\s*\(at line (?P<line>\d+), column (?P<col>\d+)\)\s*$")
+
+
+class Experiment(dict):
+    """A resolved experiment configuration (a nested `dict`) and the file it came from.
+
+    `path` is the experiment file (or `None`); relative data paths are resolved against
+    `base_dir`, the file's folder.
+    """
+
+    path: Path | None = None
+
+    @property
+    def base_dir(self) -> Path:
+        return self.path.parent if self.path is not None else Path.cwd()
+
+
+def parse_toml(text: str, *, where: str) -> dict:
+    """Parse TOML text; a syntax error becomes `WHERE:LINE:COLUMN: message`."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        msg = str(err)
+        m = _POSITION.match(msg)
+        if m:
+            line, col = m.group("line"), m.group("col")
+            raise ConfigError(
+                f"{where}:{line}:{col}: TOML syntax error: {m.group('msg')} (line {line}, "
+                f"column {col})"
+            ) from None
+        raise ConfigError(f"{where}: TOML syntax error: {msg}") from None
+
+
+def parse_value(text: str):
+    """A command-line value read as TOML (`4`, `1.5`, `true`, `[1, 2]`, `"x"`), else a string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def load_experiment(path, overrides: Mapping[str, object] | None = None) -> Experiment:
+    """Read, validate and resolve an experiment file.
+
+    **Arguments:**
+
+    - `path`: the TOML file.
+    - `overrides`: dotted settings to change after reading (`{"model.poly_order": 4}`), as
+      `hdjax run --set` passes them.
+
+    **Returns:** an [`hdjax.config.Experiment`][] (a resolved nested dict with `path`).
+
+    **Raises:** [`hdjax.ConfigError`][] for a missing file, a syntax error (with line and column),
+    an unknown table or key (with a "did you mean" answer) or a value out of range.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise ConfigError(f"{path}: no such experiment file")
+    if path.is_dir():
+        raise ConfigError(f"{path}: is a directory; give an experiment .toml file")
+    doc = parse_toml(path.read_text(), where=str(path))
+    cfg = resolve(doc, where=str(path))
+    for setting, value in (overrides or {}).items():
+        cfg = apply_setting(cfg, setting, value, where="--set")
+    exp = Experiment(cfg)
+    exp.path = path.resolve()
+    return exp
+
+
+def experiment_from_dict(doc: Mapping, *, base_dir=None, where: str = "config") -> Experiment:
+    """An [`hdjax.config.Experiment`][] from an in-memory document (for tests and scripts)."""
+    exp = Experiment(resolve(doc, where=where))
+    exp.path = None if base_dir is None else Path(base_dir).resolve() / "<memory>.toml"
+    return exp
+
+
+# ---------------------------------------------------------------------------------------------
+# Writing (tomllib only reads; the resolved config holds only tables, lists and scalars)
+
+
+def _key(k: str) -> str:
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else _string(k)
+
+
+def _string(s: str) -> str:
+    out = s.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n").replace("\t", "\\t")
+    return f'"{out}"'
+
+
+def _value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, str):
+        return _string(v)
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    if isinstance(v, Mapping):
+        return "{" + ", ".join(f"{_key(str(k))} = {_value(x)}" for k, x in v.items()) + "}"
+    raise ConfigError(f"cannot write {v!r} ({type(v).__name__}) to TOML")
+
+
+def dumps_toml(doc: Mapping, header: str = "") -> str:
+    """TOML text for a nested mapping of tables (sub-tables written inline)."""
+    lines = [f"# {h}" for h in header.splitlines()] if header else []
+    scalars = {k: v for k, v in doc.items() if not isinstance(v, Mapping)}
+    for k, v in scalars.items():
+        lines.append(f"{_key(k)} = {_value(v)}")
+    for table, body in doc.items():
+        if not isinstance(body, Mapping):
+            continue
+        lines.append("")
+        lines.append(f"[{_key(table)}]")
+        for k, v in body.items():
+            lines.append(f"{_key(str(k))} = {_value(v)}")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,250 @@
+"""The steps of an experiment: build the model, calibrate, estimate, train the network, time.
+
+Each step is a plain function of the resolved configuration and the data, so `hdjax run`,
+`hdjax sweep` and scripts share them.
+"""
+
+from __future__ import annotations
+
+import time
+import timeit
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import ConfigError
+from .._joint import Joint
+from .._metrics import error_metrics
+from .._recording import Recording
+
+PAPER_MS_PER_100 = {"model": 9.232, "network": 25.442}
+"""Song et al. Section IV.B: time to estimate 100 torques on an i7-7700H [ms]."""
+
+PAPER_ERRORS = {
+    "model": {
+        "slow": (84.8, 42.3),
+        "fast": (400.0, 67.06),
+        "sudden": (80.23, 32.99),
+        "static": (29.9, 14.48),
+    },
+    "network": {
+        "slow": (29.9, 14.48),
+        "fast": (167.1, 11.3),
+        "sudden": (43.1, 2.84),
+        "static": (20.4, 5.9),
+    },
+}
+"""Song et al. Section IV.B (Figs. 9-16): (maximum, RMS) torque error [N·m] per experiment."""
+
+
+# ---------------------------------------------------------------------------------------------
+# The compliance model
+
+
+def current_scale(cfg: dict, train: list[Recording]) -> float:
+    """The `[model] current_scale`, with `"auto"` = the largest |current| in the training data."""
+    value = cfg["model"]["current_scale"]
+    if value != "auto":
+        return float(value)
+    peak = max(float(np.max(np.abs(np.asarray(r.current)))) for r in train)
+    return peak if peak > 0 else 1.0
+
+
+def build_model(cfg: dict, joint: Joint, scale: float):
+    """The uncalibrated [`hdjax.compliance.ComplianceModel`][] of a `[model]` table."""
+    from ..compliance import ComplianceModel
+
+    m = cfg["model"]
+    return ComplianceModel.paper(
+        joint,
+        n_segments=m["n_segments"],
+        poly_order=m["poly_order"],
+        current_scale=scale,
+        kinematic=m["kinematic"],
+        fourier_order=m["fourier_order"],
+        harmonic_orders_m=tuple(m["harmonic_orders_m"]),
+        harmonic_orders_l=tuple(m["harmonic_orders_l"]),
+        per_segment=m["per_segment"],
+        velocity=m["velocity"],
+    )
+
+
+def stacked_signals(model, recordings: list[Recording]):
+    """Signals and reference torque of several recordings, stacked (velocities per recording)."""
+    from ..compliance import Signals, signals_from_recording
+
+    sigs = [
+        signals_from_recording(r, model.ratio, model.twist_sign, velocity=model.velocity)
+        for r in recordings
+    ]
+    torque = jnp.concatenate([jnp.asarray(r.column("torque")) for r in recordings])
+    if len(sigs) == 1:
+        return sigs[0], torque
+    cat = lambda name: jnp.concatenate([getattr(s, name) for s in sigs])
+    extras = {k: jnp.concatenate([s.extras[k] for s in sigs]) for k in sigs[0].extras}
+    sig = Signals(
+        twist=cat("twist"),
+        current=cat("current"),
+        theta_m=cat("theta_m"),
+        theta_l=cat("theta_l"),
+        omega_m=cat("omega_m"),
+        omega_l=cat("omega_l"),
+        extras=extras,
+    )
+    return sig, torque
+
+
+def calibrate(cfg: dict, model, train: list[Recording], warn=None):
+    """Calibrate by the `[fit]` method; returns a [`hdjax.compliance.CalibrationResult`][].
+
+    Warnings (terms the data cannot reach) go to `warn` (a callable) when given.
+    """
+    from ..compliance import calibrate_lstsq, calibrate_rls
+
+    data = stacked_signals(model, train)
+    fit = cfg["fit"]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if fit["method"] == "rls":
+            result = calibrate_rls(
+                model,
+                data,
+                block_size=fit["block"],
+                forgetting=fit["forgetting"],
+                init_samples=fit["init_samples"] or None,
+            )
+        else:
+            result = calibrate_lstsq(model, data, throw=False)
+    for w in caught:
+        (warn or (lambda msg: None))(str(w.message))
+    return result
+
+
+def estimate_model(model, recordings: dict[str, Recording]) -> dict:
+    """Torque estimates of a calibrated model on each recording (name -> TorqueEstimate)."""
+    from ..compliance import estimate_torque
+
+    return {name: estimate_torque(model, rec) for name, rec in recordings.items()}
+
+
+def metrics_of(estimates: dict, recordings: dict[str, Recording], rated: float) -> dict:
+    """name -> error metrics dict (rms, max, bias, rms_pct, max_pct, n), over all samples."""
+    out = {}
+    for name, est in estimates.items():
+        torque = est.torque if hasattr(est, "torque") else est
+        m = error_metrics(torque, recordings[name].column("torque"), rated).as_dict()
+        if hasattr(est, "in_range"):
+            m["out_of_range_pct"] = 100.0 * float(1.0 - np.mean(np.asarray(est.in_range)))
+        out[name] = m
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# The network
+
+
+def network_available() -> str:
+    """`""` when the network package can be used, else why not."""
+    try:
+        from .. import network  # noqa: F401
+
+        for name in ("Network", "build_features", "train_optax", "estimate_torque"):
+            getattr(network, name)
+    except (ImportError, AttributeError) as err:
+        return f"hdjax.network is not available ({err})"
+    return ""
+
+
+def train_network(cfg: dict, joint: Joint, train: list[Recording], seed: int, val=None):
+    """Train the `[network]` on the training recordings; returns `(network, info dict)`.
+
+    At most `max_train_samples` samples are used, spread evenly over all training recordings
+    (every k-th sample); features are built per recording so velocities and the Kalman filter
+    never straddle two recordings.
+    """
+    from .. import network as nw
+
+    n_cfg = cfg["network"]
+    feats = [
+        nw.build_features(
+            r,
+            joint,
+            periodic=n_cfg["periodic"],
+            orders=tuple(n_cfg["orders"]),
+            kalman=n_cfg["kalman"],
+        )
+        for r in train
+    ]
+    x = np.concatenate([np.asarray(f.x) for f in feats])
+    y = np.concatenate([np.asarray(r.column("torque")) for r in train])
+    stride = max(1, -(-x.shape[0] // n_cfg["max_train_samples"]))
+    x, y = x[::stride], y[::stride]
+    key = jax.random.PRNGKey(seed)
+    k_init, k_train = jax.random.split(key)
+    net = nw.Network(feats[0].layout, tuple(n_cfg["hidden"]), key=k_init)
+    t0 = time.perf_counter()
+    if n_cfg["trainer"] == "backprop":
+        res = nw.train_backprop(
+            net,
+            x,
+            y,
+            mu=n_cfg["learning_rate"],
+            eta=n_cfg["eta"],
+            error_target=0.0,
+            max_learnings=n_cfg["steps"],
+            key=k_train,
+        )
+    else:
+        res = nw.train_optax(
+            net,
+            x,
+            y,
+            learning_rate=n_cfg["learning_rate"],
+            steps=n_cfg["steps"],
+            key=k_train,
+            optimizer=n_cfg["optimizer"],
+            batch_size=n_cfg["batch_size"] or None,
+        )
+    fit_s = time.perf_counter() - t0
+    hist = np.asarray(res.history)
+    info = {
+        "trainer": n_cfg["trainer"],
+        "hidden": list(n_cfg["hidden"]),
+        "n_parameters": int(res.network.n_parameters),
+        "train_samples": int(x.shape[0]),
+        "steps": int(res.steps),
+        "final_loss": float(hist[-1]) if hist.size else float("nan"),
+        "fit_s": fit_s,
+        "layout": list(res.network.layout.names),
+    }
+    return res.network, info
+
+
+def estimate_network(net, joint: Joint, recordings: dict[str, Recording]) -> dict:
+    """Torque estimates of a trained network on each recording (name -> array)."""
+    from .. import network as nw
+
+    return {name: nw.estimate_torque(net, rec, joint) for name, rec in recordings.items()}
+
+
+# ---------------------------------------------------------------------------------------------
+# Timing
+
+
+def time_per_100(fn, rec: Recording, repeats: int) -> dict:
+    """Time `fn(rec100)` on the first 100 samples: first call and steady state [ms].
+
+    The steady state is `min(timeit.repeat(number=1))` with `block_until_ready`, i.e. one call
+    from Python as a user makes it (checks, signals and the jitted estimate).
+    """
+    if rec.n_samples < 100:
+        raise ConfigError(f"timing needs at least 100 samples, {rec.source} has {rec.n_samples}")
+    rec100 = rec.select(slice(0, 100))
+    run = lambda: jax.block_until_ready(fn(rec100))
+    t0 = time.perf_counter()
+    run()
+    first = time.perf_counter() - t0
+    steady = min(timeit.repeat(run, number=1, repeat=repeats))
+    return {"first_call_ms": 1e3 * first, "ms_per_100": 1e3 * steady}

@@ -1,0 +1,337 @@
+"""The experiment-file schema: tables, keys, defaults and checks.
+
+An experiment file is TOML with the tables `[experiment]`, `[joint]`, `[data]`, `[model]`,
+`[fit]`, `[network]`, `[sweep]` and `[outputs]`. Every key has a default (except the joint's
+`ratio` and `rated_torque`), every value is checked before anything runs, and unknown tables or
+keys get a "did you mean" answer. [`hdjax.config.resolve`][] returns the fully resolved
+configuration (defaults filled in), which each result directory keeps as
+`config.resolved.toml` so a run can be repeated exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+
+from .._errors import ConfigError
+from .._io import did_you_mean
+from .._joint import Joint
+
+Check = Callable[[str, object], object]
+
+
+# ---------------------------------------------------------------------------------------------
+# Value checks: each takes the dotted key (for messages) and the value, returns the clean value.
+
+
+def _int(minimum: int | None = None, maximum: int | None = None) -> Check:
+    def check(key, v):
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise ConfigError(f"{key} must be an integer, got {v!r}")
+        if minimum is not None and v < minimum:
+            raise ConfigError(f"{key} must be >= {minimum}, got {v}")
+        if maximum is not None and v > maximum:
+            raise ConfigError(f"{key} must be <= {maximum}, got {v}")
+        return v
+
+    return check
+
+
+def _num(*, positive: bool = False, lo: float | None = None, hi: float | None = None) -> Check:
+    def check(key, v):
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise ConfigError(f"{key} must be a finite number, got {v!r}")
+        if positive and v <= 0:
+            raise ConfigError(f"{key} must be positive, got {v}")
+        if lo is not None and v < lo:
+            raise ConfigError(f"{key} must be >= {lo}, got {v}")
+        if hi is not None and v > hi:
+            raise ConfigError(f"{key} must be <= {hi}, got {v}")
+        return float(v)
+
+    return check
+
+
+def _bool(key, v):
+    if not isinstance(v, bool):
+        raise ConfigError(f"{key} must be true or false, got {v!r}")
+    return v
+
+
+def _str(key, v):
+    if not isinstance(v, str):
+        raise ConfigError(f"{key} must be a string, got {v!r}")
+    return v
+
+
+def _choice(*options: str) -> Check:
+    def check(key, v):
+        if v not in options:
+            hint = did_you_mean(str(v), options)
+            raise ConfigError(f"{key} must be one of {', '.join(options)}, got {v!r}{hint}")
+        return v
+
+    return check
+
+
+def _list(item: Check, *, nonempty: bool = False) -> Check:
+    def check(key, v):
+        if not isinstance(v, list):
+            raise ConfigError(f"{key} must be a list, got {v!r}")
+        if nonempty and not v:
+            raise ConfigError(f"{key} must not be empty")
+        return [item(f"{key}[{i}]", x) for i, x in enumerate(v)]
+
+    return check
+
+
+def _table(key, v):
+    if not isinstance(v, Mapping):
+        raise ConfigError(f"{key} must be a table, got {v!r}")
+    return dict(v)
+
+
+def _current_scale(key, v):
+    if v == "auto":
+        return v
+    return _num(positive=True)(key, v)
+
+
+def _test_files(key, v):
+    if isinstance(v, list):
+        return _list(_str)(key, v)
+    if isinstance(v, Mapping):
+        return {str(k): _str(f"{key}.{k}", x) for k, x in v.items()}
+    raise ConfigError(f"{key} must be a list of files or a table name -> file, got {v!r}")
+
+
+def _optional(check: Check, none_value=0) -> Check:
+    """`none_value` (TOML has no null) means "not set"."""
+
+    def inner(key, v):
+        return v if v == none_value and not isinstance(v, bool) else check(key, v)
+
+    return inner
+
+
+SCENARIOS = ("slow", "fast", "sudden", "static")
+DATA_KINDS = ("plant", "files", "synthetic")
+
+# table -> key -> (default, check). The default `...` means "required".
+SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
+    "experiment": {
+        "name": ("experiment", _str),
+        "description": ("", _str),
+        "seed": (0, _int(0)),
+    },
+    "data": {
+        "kind": ("plant", _choice(*DATA_KINDS)),
+        # plant
+        "preset": ("song", _choice("song", "hashimoto")),
+        "scenarios": (list(SCENARIOS), _list(_choice(*SCENARIOS), nonempty=True)),
+        "duration": (60.0, _num(positive=True)),
+        "train_seed_offset": (1000, _int(1)),
+        "settle": (0.0, _num(lo=0.0)),
+        "effects": ({}, _table),
+        # files
+        "train": ([], _list(_str)),
+        "test": ([], _test_files),
+        "split": (0.0, _num(lo=0.0, hi=0.95)),
+        "split_blocks": (0, _optional(_int(2))),
+        "format": ("auto", _choice("auto", "csv", "npz")),
+        "columns": ({}, _table),
+        "extras": ({}, _table),
+        "check_units": (True, _bool),
+        # synthetic (generated from the compliance model itself; no plant needed)
+        "n_samples": (20000, _int(100)),
+        "noise_arcsec": (1.0, _num(lo=0.0)),
+    },
+    "model": {
+        "n_segments": (5, _int(1, 20)),
+        "poly_order": (6, _int(0, 12)),
+        "current_scale": ("auto", _current_scale),
+        "kinematic": ("paper", _choice("paper", "harmonic", "none")),
+        "fourier_order": (3, _int(0, 12)),
+        "harmonic_orders_m": ([1.0, 2.0], _list(_num(positive=True))),
+        "harmonic_orders_l": ([1.0, 2.0], _list(_num(positive=True))),
+        "per_segment": (True, _bool),
+        "velocity": ("difference", _choice("difference", "smoothed")),
+    },
+    "fit": {
+        "method": ("lstsq", _choice("lstsq", "rls")),
+        "forgetting": (1.0, _num(lo=1e-6, hi=1.0)),
+        "block": (256, _int(1)),
+        "init_samples": (0, _optional(_int(1))),
+    },
+    "network": {
+        "enabled": (True, _bool),
+        "hidden": ([20], _list(_int(1), nonempty=True)),
+        "periodic": (False, _bool),
+        "orders": ([1, 2], _list(_int(1), nonempty=True)),
+        "kalman": (True, _bool),
+        "trainer": ("optax", _choice("optax", "backprop")),
+        "optimizer": ("adam", _choice("adam", "adamw", "sgd")),
+        "learning_rate": (0.01, _num(positive=True)),
+        "eta": (0.01, _num(positive=True)),
+        "steps": (3000, _int(1)),
+        "batch_size": (0, _optional(_int(1))),
+        "max_train_samples": (20000, _int(10)),
+    },
+    "sweep": {
+        "setting": ("model.poly_order", _str),
+        "values": ([1, 2, 3, 4, 5, 6, 7, 8], _list(lambda k, v: v, nonempty=True)),
+    },
+    "outputs": {
+        "figures": (True, _bool),
+        "save_model": (True, _bool),
+        "timing": (True, _bool),
+        "timing_repeats": (20, _int(1)),
+        "paper_reference": (False, _bool),
+    },
+}
+
+TABLES = ("experiment", "joint") + tuple(k for k in SCHEMA if k != "experiment")
+
+# Settings a sweep may vary: every schema key of these tables, plus network width/depth.
+SWEEPABLE_TABLES = ("model", "fit", "network", "data")
+VIRTUAL_SETTINGS = ("network.width", "network.depth")
+
+
+def sweepable_settings() -> tuple[str, ...]:
+    keys = [f"{t}.{k}" for t in SWEEPABLE_TABLES for k in SCHEMA[t]]
+    return tuple(keys) + VIRTUAL_SETTINGS
+
+
+def all_settings() -> tuple[str, ...]:
+    return tuple(f"{t}.{k}" for t in SCHEMA for k in SCHEMA[t])
+
+
+def resolve(doc: Mapping, *, where: str = "config") -> dict:
+    """Validate a parsed experiment document and fill in every default.
+
+    **Arguments:**
+
+    - `doc`: the parsed TOML (a nested mapping).
+    - `where`: the file name, for messages.
+
+    **Returns:** a new nested `dict` with every table and key of the schema (the `[joint]`
+    table as [`hdjax.Joint.to_dict`][] gives it).
+
+    **Raises:** [`hdjax.ConfigError`][] naming the table and key, with a "did you mean" answer
+    for a misspelt table or key.
+    """
+    for table in doc:
+        if table not in TABLES:
+            raise ConfigError(
+                f"{where}: unknown table [{table}]{did_you_mean(table, TABLES)}; known tables: "
+                f"{', '.join(f'[{t}]' for t in TABLES)}"
+            )
+    if "joint" not in doc:
+        raise ConfigError(
+            f"{where}: no [joint] table; it needs at least ratio and rated_torque, e.g. "
+            "[joint] ratio = 160, rated_torque = 400"
+        )
+    out: dict = {}
+    joint_table = doc["joint"]
+    if not isinstance(joint_table, Mapping):
+        raise ConfigError(f"{where}: [joint] must be a table")
+    joint = Joint.from_dict(joint_table, where=f"{where} [joint]")
+    out["joint"] = joint.to_dict()
+    for table, spec in SCHEMA.items():
+        given = doc.get(table, {})
+        if not isinstance(given, Mapping):
+            raise ConfigError(f"{where}: [{table}] must be a table, got {given!r}")
+        for key in given:
+            if key not in spec:
+                raise ConfigError(
+                    f"{where}: unknown key {key!r} in [{table}]{did_you_mean(key, spec)}; known "
+                    f"keys: {', '.join(spec)}"
+                )
+        clean = {}
+        for key, (default, check) in spec.items():
+            if key in given:
+                clean[key] = check(f"{where} [{table}] {key}", given[key])
+            else:
+                clean[key] = _copy(default)
+        out[table] = clean
+    _cross_checks(out, where)
+    return out
+
+
+def _copy(v):
+    if isinstance(v, list):
+        return list(v)
+    if isinstance(v, dict):
+        return dict(v)
+    return v
+
+
+def _cross_checks(cfg: dict, where: str) -> None:
+    data = cfg["data"]
+    if data["kind"] == "files":
+        if not data["train"]:
+            raise ConfigError(
+                f'{where} [data]: kind = "files" needs train = ["file.csv", ...] (recordings '
+                "with a reference torque to calibrate on)"
+            )
+        if not data["test"] and data["split"] <= 0:
+            raise ConfigError(
+                f"{where} [data]: give test files (test = [...]) or a split fraction (e.g. "
+                "split = 0.3 keeps the last 30% of each train file for testing)"
+            )
+    sweep = cfg["sweep"]
+    check_sweep_setting(sweep["setting"], where=f"{where} [sweep] setting")
+
+
+def check_sweep_setting(setting: str, *, where: str = "sweep") -> str:
+    """Refuse a sweep over a setting that does not exist (with a "did you mean" answer)."""
+    options = sweepable_settings()
+    if setting not in options:
+        raise ConfigError(
+            f"{where}: cannot sweep over unknown setting {setting!r}"
+            f"{did_you_mean(setting, options)}; settings are dotted keys such as "
+            "model.poly_order, model.fourier_order, model.n_segments, network.width, network.depth"
+        )
+    return setting
+
+
+def apply_setting(cfg: dict, setting: str, value, *, where: str = "override") -> dict:
+    """A copy of a resolved config with one dotted setting changed and re-validated."""
+    import copy
+
+    new = copy.deepcopy(cfg)
+    table, _, key = setting.partition(".")
+    if setting == "network.width":
+        depth = len(new["network"]["hidden"])
+        value = _int(1)(f"{where} network.width", value)
+        new["network"]["hidden"] = [value] * depth
+        return new
+    if setting == "network.depth":
+        width = new["network"]["hidden"][0]
+        value = _int(1)(f"{where} network.depth", value)
+        new["network"]["hidden"] = [width] * value
+        return new
+    if table == "joint":
+        j = dict(new["joint"])
+        j[key] = value
+        new["joint"] = Joint.from_dict(j, where=f"{where} [joint]").to_dict()
+        return new
+    if table not in SCHEMA or key not in SCHEMA[table]:
+        options = all_settings() + VIRTUAL_SETTINGS + tuple(f"joint.{k}" for k in _joint_keys())
+        raise ConfigError(f"{where}: unknown setting {setting!r}{did_you_mean(setting, options)}")
+    _, check = SCHEMA[table][key]
+    new[table][key] = check(f"{where} {setting}", value)
+    if table == "sweep" and key == "setting":
+        check_sweep_setting(value, where=where)
+    return new
+
+
+def _joint_keys():
+    import dataclasses
+
+    return [f.name for f in dataclasses.fields(Joint)]
+
+
+def joint_of(cfg: Mapping) -> Joint:
+    """The [`hdjax.Joint`][] of a resolved config."""
+    return Joint.from_dict(cfg["joint"])

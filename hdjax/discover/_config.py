@@ -1,0 +1,91 @@
+"""Discover experiments from a TOML file: joint, data (one or two logs, column map), options.
+
+```toml
+[joint]
+ratio = 101
+rated_torque = 150
+twist_sign = -1
+
+[data]
+train = "path/to/train.csv"         # relative to this file
+test = "path/to/test.csv"           # or, with one log, test_blocks below
+# path = "one.csv"
+# test_blocks = { block = 100, every = 4 }   # every 4th block of 100 samples is TEST
+[data.columns]                       # optional column map (see hdjax.ColumnMap)
+t = "Timestamp"
+
+[discover]
+max_effects = 5
+min_gain = 0.02
+```
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from .._errors import ConfigError
+from .._io import ColumnMap, did_you_mean, load_recording
+from .._joint import Joint
+
+_DATA_KEYS = ("path", "train", "test", "test_blocks", "columns", "extras")
+_DISCOVER_KEYS = ("max_effects", "min_gain", "ignore_columns", "n_segments", "poly_order",
+                  "fourier_order", "families")
+
+
+def load_discover_config(path):
+    """Read a discover experiment: returns `(train, test, joint, options dict, notes)`."""
+    path = Path(path)
+    if not path.exists():
+        raise ConfigError(f"{path}: no such file")
+    try:
+        doc = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{path}: not valid TOML: {err}") from None
+    for key in doc:
+        if key not in ("joint", "data", "discover"):
+            raise ConfigError(
+                f"{path}: unknown table [{key}]{did_you_mean(key, ['joint', 'data', 'discover'])}"
+            )
+    if "joint" not in doc:
+        raise ConfigError(f"{path}: no [joint] table")
+    joint = Joint.from_dict(doc["joint"], where=f"{path} [joint]")
+    data = doc.get("data")
+    if not data:
+        raise ConfigError(f"{path}: no [data] table")
+    for key in data:
+        if key not in _DATA_KEYS:
+            raise ConfigError(f"{path} [data]: unknown key {key!r}{did_you_mean(key, _DATA_KEYS)}")
+    colmap = None
+    if "columns" in data or "extras" in data:
+        colmap = ColumnMap.from_dict(
+            {k: data[k] for k in ("columns", "extras") if k in data}, where=f"{path} [data]"
+        )
+    here = path.parent
+    notes = []
+    if "path" in data:
+        rec = load_recording(here / data["path"], colmap)
+        blocks = data.get("test_blocks", {"block": 100, "every": 4})
+        block, every = int(blocks.get("block", 100)), int(blocks.get("every", 4))
+        if block < 1 or every < 2:
+            raise ConfigError(f"{path} [data] test_blocks: need block >= 1 and every >= 2")
+        idx = np.arange(rec.n_samples) // block
+        train, test = rec.select(idx % every != every - 1), rec.select(idx % every == every - 1)
+        notes.append(
+            f"one log split into TRAIN and TEST: every {every}th block of {block} samples is TEST"
+        )
+    elif "train" in data and "test" in data:
+        train = load_recording(here / data["train"], colmap)
+        test = load_recording(here / data["test"], colmap)
+    else:
+        raise ConfigError(f"{path} [data]: give either 'path' or both 'train' and 'test'")
+    options = doc.get("discover", {})
+    for key in options:
+        if key not in _DISCOVER_KEYS:
+            raise ConfigError(
+                f"{path} [discover]: unknown key {key!r}{did_you_mean(key, _DISCOVER_KEYS)}"
+            )
+    return train, test, joint, options, notes

@@ -1,0 +1,133 @@
+"""`hdjax discover` through the command line: the contract and every bad input of issue 6."""
+
+import json
+
+import numpy as np
+import pytest
+
+import hdjax
+from hdjax.discover import cli_main
+
+from .discover_data import synthetic_recording
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("discover")
+    train = synthetic_recording(1, [("harmonic_m", 2.0, 30 * 4.85e-6)], n=8000)
+    test = synthetic_recording(2, [("harmonic_m", 2.0, 30 * 4.85e-6)], n=4000)
+    hdjax.save_csv(train, d / "train.csv")
+    hdjax.save_csv(test, d / "test.csv")
+    (d / "joint.toml").write_text("[joint]\nratio = 160\nrated_torque = 400\n")
+    return d
+
+
+def _run(files, out, *extra, train="train.csv", test="test.csv"):
+    argv = ["--train", str(files / train), "--test", str(files / test), "--joint",
+            str(files / "joint.toml"), "--out", str(out), "--quiet", *extra]
+    return cli_main(argv)
+
+
+def _one_line_error(capsys, *words):
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0, err
+    assert err.startswith("hdjax discover: error:")
+    for w in words:
+        assert w in err, err
+    return err
+
+
+def test_contract_report(files, tmp_path):
+    out = tmp_path / "out"
+    assert _run(files, out, "--no-figures") == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert set(rep["baseline"]) >= {"rms", "max"}
+    assert rep["effects"] == [s["effect"] for s in rep["steps"]]
+    assert rep["effects"][0] == "harmonic:theta_m:2"
+    assert rep["final"]["rms"] == rep["steps"][-1]["rms"]
+    assert rep["final"]["rms"] < 0.5 * rep["baseline"]["rms"]
+    # the numbers are the TEST errors of the final model, recomputed independently here
+    model = hdjax.compliance.ComplianceModel.from_dict(rep["final_model"])
+    test = hdjax.load_csv(files / "test.csv")
+    est = np.asarray(hdjax.compliance.estimate_torque(model, test).torque)
+    err = est - np.asarray(test.torque)
+    assert rep["final"]["rms"] == pytest.approx(np.sqrt(np.mean(err**2)), rel=1e-9)
+    assert rep["final"]["max"] == pytest.approx(np.max(np.abs(err)), rel=1e-9)
+
+
+def test_figures_and_markdown(files, tmp_path):
+    out = tmp_path / "out"
+    assert _run(files, out, "--max-effects", "1") == 0
+    names = {p.name for p in (out / "figures").iterdir()}
+    assert {"spectrum_0.png", "residual_0.png", "residual_1.png", "torque.png"} <= names
+    md = (out / "report.md").read_text()
+    assert "harmonic:theta_m:2" in md and "figures/torque.png" in md
+
+
+def test_refuses_non_empty_out_without_overwrite(files, tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "old.txt").write_text("x")
+    assert _run(files, out) == 2
+    _one_line_error(capsys, "--overwrite")
+    assert sorted(p.name for p in out.iterdir()) == ["old.txt"]
+
+
+def test_different_ratios(files, tmp_path, capsys):
+    rec = hdjax.load_csv(files / "test.csv")
+    other = rec.select(slice(None))
+    other = hdjax.make_recording(
+        other.t, np.asarray(other.theta_m) * 100 / 160, other.theta_l, other.current,
+        other.torque,
+    )
+    hdjax.save_csv(other, tmp_path / "test100.csv")
+    (tmp_path / "test100.csv").rename(files / "test100.csv")
+    out = tmp_path / "out"
+    assert _run(files, out, test="test100.csv") == 2
+    _one_line_error(capsys, "different ratios")
+    assert not out.exists()
+
+
+def test_test_lacks_a_train_column(files, tmp_path, capsys):
+    rec = hdjax.load_csv(files / "train.csv")
+    hdjax.save_csv(rec.with_extras(temperature=np.linspace(20, 30, rec.n_samples)),
+                   files / "train_temp.csv")
+    assert _run(files, tmp_path / "o", train="train_temp.csv") == 2
+    _one_line_error(capsys, "lacks column", "temperature")
+
+
+def test_test_lacks_a_core_column(files, tmp_path, capsys):
+    text = (files / "test.csv").read_text().splitlines()
+    header = text[0].split(",")
+    keep = [i for i, h in enumerate(header) if h != "current"]
+    rows = [",".join(line.split(",")[i] for i in keep) for line in text]
+    (files / "test_nocurrent.csv").write_text("\n".join(rows) + "\n")
+    assert _run(files, tmp_path / "o", test="test_nocurrent.csv") == 2
+    _one_line_error(capsys, "current")
+
+
+def test_too_short_says_the_length_needed(files, tmp_path, capsys):
+    rec = hdjax.load_csv(files / "train.csv")
+    # 600 samples while the motor turns less than the 4*pi rad that order 0.5 needs
+    short = rec.select(slice(0, 600))
+    theta_l = 0.01 * np.sin(np.linspace(0, 3.0, 600))
+    slow = hdjax.make_recording(
+        short.t, 160 * theta_l, theta_l, short.current, short.torque,
+    )
+    assert float(np.ptp(np.asarray(slow.theta_m))) < 4 * np.pi
+    hdjax.save_csv(slow, files / "short.csv")
+    assert _run(files, tmp_path / "o", train="short.csv") == 2
+    err = _one_line_error(capsys, "too short", "needs")
+    assert "rad" in err and " s" in err
+
+
+def test_constant_extra_column(files, tmp_path, capsys):
+    for name in ("train.csv", "test.csv"):
+        rec = hdjax.load_csv(files / name)
+        hdjax.save_csv(rec.with_extras(temperature=np.full(rec.n_samples, 25.0)),
+                       files / f"const_{name}")
+    assert _run(files, tmp_path / "o", train="const_train.csv", test="const_test.csv") == 2
+    _one_line_error(capsys, "constant", "temperature", "--ignore-column")
+    # and it runs when told to ignore the column
+    assert _run(files, tmp_path / "o2", "--ignore-column", "temperature", "--no-figures",
+                "--max-effects", "1", train="const_train.csv", test="const_test.csv") == 0
