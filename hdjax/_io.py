@@ -29,7 +29,11 @@ _COLUMN_KEYS = ("source", "scale", "offset", "counts_per_rev", "modulus")
 
 def did_you_mean(name: str, options) -> str:
     """A ` (did you mean 'x'?)` hint, or an empty string when nothing is close."""
-    close = difflib.get_close_matches(name, list(options), n=1, cutoff=0.6)
+    options = list(options)
+    same_but_case = [o for o in options if o.lower() == name.lower() and o != name]
+    if same_but_case:  # 'theta_L' for 'theta_l' beats the equally close 'theta_m'
+        return f" (did you mean {same_but_case[0]!r}?)"
+    close = difflib.get_close_matches(name, options, n=1, cutoff=0.6)
     return f" (did you mean {close[0]!r}?)" if close else ""
 
 

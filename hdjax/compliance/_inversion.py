@@ -6,23 +6,32 @@ per-segment coefficients (Table I) the terms removed depend on the segment, so t
 resolved self-consistently:
 
 1. for every calibrated segment $s$, invert with that segment's terms: a candidate $T_s$;
-2. a candidate is *valid* when it falls inside its own segment $[l_s, u_s)$ (the outer
-   segments extend without bound);
+2. a candidate is *valid* when it falls inside its own segment, edges included, $[l_s, u_s]$,
+   with a slack of `EDGE_TOLERANCE` ($10^{-9}\tau_0$) for rounding (the outer segments extend
+   without bound); segments the calibration left out never are;
 3. exactly one valid candidate: take it. **Several** (the twist ranges of neighbouring segments
    overlap): take the one lying deepest inside its segment, measured in units of the segment
-   width, and flag the sample `ambiguous`. **None** (the twist falls in a gap between
-   segments): take the candidate nearest to its own segment, clipped onto that segment's edge,
-   and flag the sample `unresolved`.
+   width (outer segments: the paper's width $2\tau_0/n$), the lower segment on a tie, and
+   flag the sample `ambiguous`. **None** (the twist falls in a gap between segments): take
+   the candidate nearest to its own segment, clipped onto that segment's edge, and flag the
+   sample `unresolved`.
 
-With shared coefficients the compliance is monotone, so exactly one candidate is valid
-(up to ties at a knot). Effects that depend nonlinearly on the present torque (stiffening,
-backlash) are then solved by safeguarded Newton steps, and effects on the torque path
-(hysteresis) by a fixed-point iteration on the estimated path, causally.
+With shared coefficients the compliance is continuous and increasing, so exactly one candidate
+is valid, except for a torque on a knot (to rounding), valid in both neighbours and then
+flagged `ambiguous` with the same torque. Forward data from a per-segment model is never
+`unresolved` (its own segment's candidate is always valid); when `ambiguous`, the error is at
+most the jump of $h$ between neighbouring segments divided by the smaller compliance.
+`in_range` is `torque_range[0] <= T <= torque_range[1]` (the calibrated range).
+
+Effects that depend nonlinearly on the present torque (stiffening, backlash) are then solved
+by safeguarded Newton steps, and effects on the torque path (hysteresis) by a fixed-point
+iteration on the estimated path, causally.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -35,6 +44,9 @@ from .._recording import Recording
 from ._lstsq import check_invertible
 from ._model import ComplianceModel
 from ._signals import Signals, signals_from_recording
+
+EDGE_TOLERANCE = 1e-9
+"""A candidate counts as inside its segment up to this fraction of the rated torque."""
 
 NEWTON_STEPS = 8
 PATH_ITERATIONS = 4
@@ -55,22 +67,30 @@ class TorqueEstimate(eqx.Module):
     unresolved: Bool[Array, " n"]
 
 
-def _segment_candidates(model: ComplianceModel, r, base_h, g):
-    """Eq. (27) per segment: candidates, validity and distance outside each segment."""
-    k = model.k
-    cands, dist, width = [], [], []
-    for s, (lo, hi) in enumerate(model.segment_bounds):
-        a = min(max(0.0, lo), hi)  # point of segment s nearest to 0 N·m
-        f_a = model.hinge_basis(jnp.asarray([a], jnp.float64))[0] @ k
-        h = base_h[:, s] if model.per_segment else base_h[:, 0]
-        t_s = (r - h - f_a + k[s] * a) / (k[s] + g)
-        cands.append(t_s)
-        below = jnp.where(jnp.isfinite(lo), lo - t_s, -jnp.inf)
-        above = jnp.where(jnp.isfinite(hi), t_s - hi, -jnp.inf)
-        dist.append(jnp.maximum(below, above))  # <= 0 inside, > 0 outside
-        w = (hi - lo) if math.isfinite(hi - lo) else 2.0 * model.rated_torque / model.n_segments
-        width.append(w)
-    return jnp.stack(cands, 1), jnp.stack(dist, 1), jnp.asarray(width)
+def _base_h(model: ComplianceModel, sig: Signals) -> list:
+    """Torque-free part $h$ of eq. (10) per segment (one entry when coefficients are shared).
+
+    Built column by column with scalar coefficients so XLA fuses it into one elementwise loop
+    (no `n x n_terms` design is materialised).
+    """
+    cols = []
+    for term in model.base_terms:
+        if hasattr(term, "column_list"):
+            cols += term.column_list(sig)
+        else:
+            block = term.columns(sig)
+            cols += [block[:, j] for j in range(block.shape[1])]
+    coef = model.base_coef
+    rows = coef.shape[0]
+    if not cols:
+        return [jnp.zeros(sig.n_samples, jnp.float64)] * rows
+    out = []
+    for s in range(rows):
+        h = cols[0] * coef[s, 0]
+        for j in range(1, len(cols)):
+            h = h + cols[j] * coef[s, j]
+        out.append(h)
+    return out
 
 
 def _calibrated_segments(model: ComplianceModel) -> np.ndarray:
@@ -83,20 +103,63 @@ def _calibrated_segments(model: ComplianceModel) -> np.ndarray:
     return ok
 
 
-def _piecewise(model: ComplianceModel, r, base_h, g):
-    cands, dist, width = _segment_candidates(model, r, base_h, g)
-    ok = jnp.asarray(_calibrated_segments(model))
-    valid = (dist <= 0.0) & (cands == cands) & ok[None, :]  # also rejects NaN candidates
-    n_valid = valid.sum(axis=1)
-    depth = jnp.where(valid, -dist / width[None, :], -jnp.inf)
-    pick_valid = jnp.argmax(depth, axis=1)
-    pick_near = jnp.argmin(jnp.where(ok[None, :], dist, jnp.inf), axis=1)
-    seg = jnp.where(n_valid > 0, pick_valid, pick_near)
-    t = jnp.take_along_axis(cands, seg[:, None], axis=1)[:, 0]
-    lo = jnp.asarray([b[0] for b in model.segment_bounds])[seg]
-    hi = jnp.asarray([b[1] for b in model.segment_bounds])[seg]
-    t = jnp.where(n_valid > 0, t, jnp.clip(t, lo, hi))
-    return t, seg, n_valid > 1, n_valid == 0
+def _piecewise(model: ComplianceModel, r, hs: list, g):
+    """Eq. (27) with the segment resolved by the rules of the module docstring.
+
+    Written as a running selection over the segments (elementwise only, so it fuses): for each
+    segment the candidate $T_s$, its signed distance outside the segment and its depth inside.
+    """
+    k = model.k
+    ok = _calibrated_segments(model)
+    bounds = model.segment_bounds
+    default_width = 2.0 * model.rated_torque / model.n_segments
+    tol = EDGE_TOLERANCE * model.rated_torque
+    n_valid = None
+    for s, (lo, hi) in enumerate(bounds):
+        if not ok[s]:
+            continue
+        a = min(max(0.0, lo), hi)  # point of segment s nearest to 0 N·m
+        phi_a = np.asarray([min(max(a, l_), h_) - min(max(0.0, l_), h_) for l_, h_ in bounds])
+        f_a = jnp.asarray(phi_a, jnp.float64) @ k
+        h = hs[s] if model.per_segment else hs[0]
+        num = r - h - (f_a - k[s] * a)
+        t_s = num / k[s] if g is None else num / (k[s] + g)
+        # signed distance outside the segment (<= 0 inside) and clipped candidate
+        parts = []
+        if math.isfinite(lo):
+            parts.append(lo - t_s)
+        if math.isfinite(hi):
+            parts.append(t_s - hi)
+        if not parts:
+            dist = jnp.full_like(t_s, -jnp.inf)
+        else:
+            dist = parts[0] if len(parts) == 1 else jnp.maximum(parts[0], parts[1])
+        width = (hi - lo) if math.isfinite(hi - lo) else default_width
+        # edges included, with slack for rounding: a torque on a knot inverts to the knot
+        # +- a few ulps, which must not make its own segment's candidate invalid
+        valid = (dist <= tol) & (t_s == t_s)  # also rejects NaN candidates
+        depth = jnp.where(valid, -dist / width, -jnp.inf)
+        t_clip = jnp.clip(t_s, lo, hi)
+        seg = jnp.full(t_s.shape, s, jnp.int32)
+        if n_valid is None:
+            n_valid = valid.astype(jnp.int32)
+            best_depth, best_t, best_seg = depth, t_s, seg
+            near_dist, near_t, near_seg = dist, t_clip, seg
+            continue
+        n_valid = n_valid + valid.astype(jnp.int32)
+        # strict comparisons keep the first segment on ties (as argmax/argmin would)
+        take = depth > best_depth
+        best_depth = jnp.where(take, depth, best_depth)
+        best_t = jnp.where(take, t_s, best_t)
+        best_seg = jnp.where(take, s, best_seg)
+        closer = dist < near_dist
+        near_dist = jnp.where(closer, dist, near_dist)
+        near_t = jnp.where(closer, t_clip, near_t)
+        near_seg = jnp.where(closer, s, near_seg)
+    any_valid = n_valid > 0
+    t = jnp.where(any_valid, best_t, near_t)
+    seg = jnp.where(any_valid, best_seg, near_seg)
+    return t, seg, n_valid > 1, ~any_valid
 
 
 def _split_effects(model: ComplianceModel):
@@ -110,24 +173,21 @@ def _split_effects(model: ComplianceModel):
     return out
 
 
-@eqx.filter_jit
-def _estimate(model: ComplianceModel, sig: Signals):
+def _estimate_impl(model: ComplianceModel, sig: Signals):
     effects = _split_effects(model)
-    n = sig.n_samples
     # eq. (26): twist minus the torque-free terms
     r = sig.twist
     for term, c in effects["none"]:
         r = r - term.columns(sig, None) @ c
-    base = model.base_columns(sig)
-    base_h = base @ model.base_coef.T  # (n, n_seg) or (n, 1)
-    g = jnp.zeros(n, jnp.float64)
+    hs = _base_h(model, sig)
+    g = None
     for term, c in effects["linear"]:
-        g = g + term.torque_slope(sig) * c[0]
+        g = term.torque_slope(sig) * c[0] if g is None else g + term.torque_slope(sig) * c[0]
 
     def solve(r_eff):
-        t, seg, amb, unres = _piecewise(model, r_eff, base_h, g)
+        t, seg, amb, unres = _piecewise(model, r_eff, hs, g)
         if effects["memoryless"]:
-            t = _newton(model, t, seg, r_eff, base_h, g, effects["memoryless"])
+            t = _newton(model, t, seg, r_eff, hs, g, effects["memoryless"])
         return t, seg, amb, unres
 
     t, seg, amb, unres = solve(r)
@@ -150,10 +210,17 @@ def _estimate(model: ComplianceModel, sig: Signals):
     )
 
 
-def _newton(model, t, seg, r, base_h, g, terms):
+_estimate = eqx.filter_jit(_estimate_impl)
+
+
+def _newton(model, t, seg, r, hs, g, terms):
     k = model.k
     span = model.rated_torque / 4.0
-    h = jnp.take_along_axis(base_h, seg[:, None], 1)[:, 0] if model.per_segment else base_h[:, 0]
+    h = hs[0]
+    if model.per_segment:
+        for s in range(1, len(hs)):
+            h = jnp.where(seg == s, hs[s], h)
+    g = jnp.zeros_like(t) if g is None else g
 
     def body(_, t):
         f = model.hinge_basis(t) @ k + g * t + h
@@ -182,11 +249,7 @@ def estimate_torque(model: ComplianceModel, data) -> TorqueEstimate:
 
     Raises [`hdjax.InversionError`][] when the calibrated compliance is not increasing in torque.
     """
-    msg = check_invertible(model)
-    if msg:
-        raise InversionError(msg)
-    if not np.asarray(model.active)[: model.n_segments].any():
-        raise InversionError("the model has no calibrated segment; calibrate it first")
+    _check_estimable(model)
     if isinstance(data, Recording):
         data = signals_from_recording(data, model.ratio, model.twist_sign, velocity=model.velocity)
     missing = [
@@ -210,3 +273,94 @@ def estimate_torque(model: ComplianceModel, data) -> TorqueEstimate:
 def estimate_torque_arrays(model: ComplianceModel, sig: Signals) -> Float[Array, " n"]:
     """The torque alone, for use inside other jitted code (no Python-side checks)."""
     return _estimate(model, sig).torque
+
+
+class SingleEstimate(NamedTuple):
+    """One sample's estimate (see [`hdjax.compliance.TorqueEstimate`][] for the flags)."""
+
+    torque: float
+    segment: int
+    in_range: bool
+    ambiguous: bool
+    unresolved: bool
+
+
+_SINGLE_CACHE: dict[int, tuple[ComplianceModel, object]] = {}
+_SINGLE_CACHE_SIZE = 8
+
+
+def _check_estimable(model: ComplianceModel) -> None:
+    msg = check_invertible(model)
+    if msg:
+        raise InversionError(msg)
+    if not _calibrated_segments(model).any():
+        raise InversionError("the model has no calibrated segment; calibrate it first")
+
+
+def torque_estimator(model: ComplianceModel):
+    """A compiled one-sample estimator specialised to `model` (checked once, here).
+
+    **Returns:** a function of a float64 array `[twist, current, theta_m, theta_l, omega_m,
+    omega_l]` returning the float64 array `[torque, segment, in_range, ambiguous, unresolved]`
+    (flags as 0/1). One packed output keeps the call from Python at a few microseconds.
+    Models whose terms read extra columns (e.g. `temperature`) are not supported here.
+    """
+    _check_estimable(model)
+    needs = {
+        name
+        for term in model.base_terms + model.effect_terms
+        for name in (getattr(term, "name", None), getattr(term, "signal", None))
+        if name is not None
+    } - {"twist", "current", "theta_m", "theta_l", "omega_m", "omega_l"}
+    if needs:
+        from .._errors import ModelMismatchError
+
+        raise ModelMismatchError(
+            f"the one-sample estimator takes no extra columns, but the model uses "
+            f"{', '.join(sorted(needs))}; use estimate_torque with Signals instead"
+        )
+
+    def one(x):
+        sig = Signals(
+            twist=x[0:1],
+            current=x[1:2],
+            theta_m=x[2:3],
+            theta_l=x[3:4],
+            omega_m=x[4:5],
+            omega_l=x[5:6],
+            extras={},
+        )
+        e = _estimate_impl(model, sig)
+        f = lambda a: a[0].astype(jnp.float64)
+        return jnp.stack(
+            [f(e.torque), f(e.segment), f(e.in_range), f(e.ambiguous), f(e.unresolved)]
+        )
+
+    return jax.jit(one)
+
+
+def estimate_torque_single(
+    model: ComplianceModel, twist, current, theta_m, theta_l, omega_m, omega_l
+) -> SingleEstimate:
+    """Estimate the torque of one sample (eqs. (26)-(27)) with low latency from Python.
+
+    The compiled estimator of [`torque_estimator`][] is cached per model object (the last
+    few models), so repeated calls cost one dispatch of a few microseconds.
+
+    **Arguments:** `model` (calibrated), then the sample's twist [rad] (eq. (5)), current [A],
+    angles [rad] and velocities [rad/s].
+
+    **Returns:** a [`SingleEstimate`][] of Python scalars.
+    """
+    hit = _SINGLE_CACHE.get(id(model))
+    if hit is None or hit[0] is not model:
+        fn = torque_estimator(model)
+        if len(_SINGLE_CACHE) >= _SINGLE_CACHE_SIZE:
+            _SINGLE_CACHE.pop(next(iter(_SINGLE_CACHE)))
+        _SINGLE_CACHE[id(model)] = (model, fn)
+    else:
+        fn = hit[1]
+    out = np.asarray(
+        fn(np.array([twist, current, theta_m, theta_l, omega_m, omega_l], dtype=np.float64))
+    )
+    return SingleEstimate(float(out[0]), int(out[1]), bool(out[2]), bool(out[3]), bool(out[4]))

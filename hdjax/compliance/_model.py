@@ -306,7 +306,9 @@ class ComplianceModel(eqx.Module):
         base = self.base_columns(sig)
         if self.per_segment:
             seg = self.segment_index(torque)
-            onehot = (seg[:, None] == jnp.arange(self.n_segments)[None, :]).astype(base.dtype)
+            onehot = (seg[:, None] == jnp.arange(self.n_segments, dtype=seg.dtype)[None, :]).astype(
+                base.dtype
+            )
             parts.append((onehot[:, :, None] * base[:, None, :]).reshape(sig.n_samples, -1))
         else:
             parts.append(base)

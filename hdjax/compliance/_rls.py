@@ -24,11 +24,11 @@ from .._custom_types import Array, Float
 from .._errors import CalibrationError, ConfigError
 from ._lstsq import (
     CalibrationResult,
-    _design,
+    _SegmentedDesign,
+    _select_active,
     _with_static,
     check_invertible,
     prepare,
-    select_active as _select_active,
 )
 from ._model import ComplianceModel
 
@@ -40,6 +40,7 @@ class RLSState(eqx.Module):
     p: Float[Array, "p p"]
 
 
+@jax.jit
 def rls_init(a0, b0) -> RLSState:
     """Initial solution from a first batch, eq. (18): $x_0 = G_0^{-1} A_0^\\top b_0$.
 
@@ -52,17 +53,26 @@ def rls_init(a0, b0) -> RLSState:
 
 
 def rls_step(state: RLSState, a, b, forgetting: float = 1.0) -> RLSState:
-    """One block update, eqs. (20)-(23) (eqs. (24)-(25) when `a` has one row)."""
-    # gain: P A^T (lambda I + A P A^T)^{-1}, by a Cholesky solve of the small m x m system
-    pa = state.p @ a.T
-    s = forgetting * jnp.eye(a.shape[0], dtype=a.dtype) + a @ pa
-    s = 0.5 * (s + s.T)
-    gain = jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(s), pa.T).T
-    # covariance downdate, then forgetting, then symmetrise
-    p = (state.p - gain @ pa.T) / forgetting
+    """One block update, eqs. (20)-(23) (eqs. (24)-(25) when `a` has one row).
+
+    With $S = \\lambda I + A P A^\\top = L L^\\top$ (Cholesky) and $W = L^{-1} A P$, the SMW
+    update of eq. (22) is $P_{k+1} = (P_k - W^\\top W)/\\lambda$ - a symmetric downdate by
+    construction - and eq. (23) is $x_{k+1} = x_k + W^\\top L^{-1} (b - A x_k)$ (the gain
+    $P_k A^\\top S^{-1}$ written through the same factor). One Cholesky of the small $m \\times m$
+    matrix and one triangular solve per block.
+    """
+    # innovation covariance S = lambda I + A P A^T and its Cholesky factor
+    ap = a @ state.p
+    s = forgetting * jnp.eye(a.shape[0], dtype=a.dtype) + ap @ a.T
+    chol = jnp.linalg.cholesky(0.5 * (s + s.T))
+    # W = L^-1 A P and z = L^-1 (b - A x), by one triangular solve with p + 1 right-hand sides
+    rhs = jnp.concatenate([ap, (b - a @ state.x)[:, None]], axis=1)
+    wz = jax.scipy.linalg.solve_triangular(chol, rhs, lower=True)
+    w, z = wz[:, :-1], wz[:, -1]
+    # covariance downdate (eq. (22)), then forgetting; estimate update (eq. (23))
+    p = (state.p - w.T @ w) / forgetting
     p = 0.5 * (p + p.T)
-    # eq. (23) written with the gain: x + P_{k+1} A^T (b - A x) = x + K (b - A x)
-    x = state.x + gain @ (b - a @ state.x)
+    x = state.x + w.T @ z
     return RLSState(x=x, p=p)
 
 
@@ -78,6 +88,14 @@ def rls_scan(state: RLSState, a_blocks, b_blocks, forgetting: float = 1.0):
     return jax.lax.scan(_step, state, (a_blocks, b_blocks))
 
 
+_rls_step_jit = jax.jit(rls_step)
+
+
+@jax.jit
+def _r_factor(a):
+    return jnp.linalg.qr(a, mode="r")
+
+
 def rls_solve(a, b, *, block_size: int = 1, forgetting: float = 1.0, init_samples=None):
     """Recursive least squares over all rows of `a` (in order).
 
@@ -86,6 +104,9 @@ def rls_solve(a, b, *, block_size: int = 1, forgetting: float = 1.0, init_sample
 
     **Returns:** the final [`RLSState`][] and the estimate after each block.
     """
+    # slice on the host: eager JAX slicing would compile one small program per shape
+    a = np.asarray(a, np.float64)
+    b = np.asarray(b, np.float64)
     n, p = a.shape
     if not isinstance(block_size, int) or block_size < 1:
         raise ConfigError(f"block_size must be a positive integer, got {block_size!r}")
@@ -94,8 +115,8 @@ def rls_solve(a, b, *, block_size: int = 1, forgetting: float = 1.0, init_sample
     n0 = 2 * p if init_samples is None else int(init_samples)
     if n0 < p or n0 > n:
         raise ConfigError(f"init_samples must lie in [{p}, {n}], got {n0}")
-    d = jnp.abs(jnp.diag(jnp.linalg.qr(a[:n0], mode="r")))
-    if not bool(jnp.min(d) > 1e-10 * jnp.max(d)):
+    d = np.abs(np.diag(_r_factor(a[:n0])))
+    if not d.min() > 1e-10 * d.max():
         raise CalibrationError(
             f"the first {n0} rows do not determine all {p} coefficients (rank-deficient initial "
             "block, eq. (18)); raise init_samples so the first block covers every torque "
@@ -116,16 +137,18 @@ def rls_solve(a, b, *, block_size: int = 1, forgetting: float = 1.0, init_sample
         history.append(h)
     tail = n_rest - n_full * block_size
     if tail:
-        state = rls_step(state, a[n - tail :], b[n - tail :], forgetting)
-        history.append(state.x[None])
-    return state, (jnp.concatenate(history) if history else state.x[None])
+        state = _rls_step_jit(state, a[n - tail :], b[n - tail :], forgetting)
+        history.append(np.asarray(state.x)[None])
+    if not history:
+        return state, state.x[None]
+    return state, jnp.asarray(np.concatenate([np.asarray(h) for h in history]))
 
 
 def calibrate_rls(
     model: ComplianceModel,
     data,
     *,
-    block_size: int = 256,
+    block_size: int = 32,
     forgetting: float = 1.0,
     init_samples: int | None = None,
     throw: bool = True,
@@ -137,11 +160,11 @@ def calibrate_rls(
     Samples are taken in time order.
     """
     sig, torque = prepare(model, data)
-    A = _design(model, sig, torque)
-    active, counts, dropped = _select_active(model, np.asarray(A), np.asarray(torque))
+    A = _SegmentedDesign(model, sig, torque).dense()
+    active, counts, dropped = _select_active(model, np.abs(A).max(axis=0) > 0, np.asarray(torque))
     idx = np.flatnonzero(active)
     a = A[:, idx]
-    scale = jnp.sqrt(jnp.mean(a * a, axis=0))
+    scale = np.sqrt(np.mean(a * a, axis=0))
     state, _ = rls_solve(
         a / scale,
         sig.twist,
@@ -150,8 +173,8 @@ def calibrate_rls(
         init_samples=init_samples,
     )
     coef = np.zeros(model.n_coef)
-    coef[idx] = np.asarray(state.x / scale)
-    resid = np.asarray(A) @ coef - np.asarray(sig.twist)
+    coef[idx] = np.asarray(state.x) / scale
+    resid = A @ coef - np.asarray(sig.twist)
     fitted = eqx.tree_at(lambda m: m.coef, model, jnp.asarray(coef))
     fitted = _with_static(fitted, active=tuple(bool(x) for x in active))
     msg = check_invertible(fitted)

@@ -1,0 +1,154 @@
+"""Closed-form calibration, Song et al. eqs. (15)-(17): truth, numpy.linalg.lstsq, bad designs."""
+
+import warnings
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import hdjax
+from hdjax.compliance import ComplianceModel, _lstsq as lstsq_mod, calibrate_lstsq
+from tests.helpers import JOINT, make_signals, numpy_design, simulate
+
+CASES = {
+    "per_segment": dict(per_segment=True, seed=1),
+    "shared": dict(per_segment=False, seed=2),
+    "harmonic": dict(per_segment=False, kinematic="harmonic", seed=3),
+}
+
+
+@pytest.fixture(scope="session", params=sorted(CASES))
+def exact_case(request):
+    return simulate(request.param, 3000, **CASES[request.param])
+
+
+@pytest.fixture(scope="session")
+def noisy_case():
+    # 0.1 arcsec of encoder noise on a twist of ~500 arcsec
+    return simulate("noisy", 3000, per_segment=True, noise=5e-7, seed=7)
+
+
+def test_recovers_truth_on_exact_data(exact_case):
+    print("seed", exact_case.seed)
+    res = calibrate_lstsq(exact_case.model, (exact_case.sig, exact_case.torque))
+    assert res.rank == res.n_terms == exact_case.model.n_coef and not res.dropped
+    # noise-free float64 data, scaled condition ~70: the coefficients are recovered to ~1e-13
+    scale = np.abs(exact_case.truth).max()
+    np.testing.assert_allclose(np.asarray(res.model.coef), exact_case.truth, atol=1e-11 * scale)
+    assert res.residual_rms < 1e-15
+
+
+def test_matches_numpy_lstsq_on_noisy_data(noisy_case):
+    c = noisy_case
+    res = calibrate_lstsq(c.model, (c.sig, c.torque))
+    A = numpy_design(c.model, c.sig, c.torque)
+    ref, *_ = np.linalg.lstsq(A, np.asarray(c.sig.twist), rcond=None)
+    # two backward-stable solvers on a design of scaled condition ~70: agree to ~1e-12 relative
+    np.testing.assert_allclose(
+        np.asarray(res.model.coef), ref, rtol=0, atol=1e-10 * np.abs(ref).max()
+    )
+    resid = A @ ref - np.asarray(c.sig.twist)
+    assert res.residual_rms == pytest.approx(np.sqrt(np.mean(resid**2)), rel=1e-10)
+    # the noise is recovered as the residual (p/n = 3 % of it is absorbed)
+    assert res.residual_rms == pytest.approx(5e-7, rel=0.05)
+    # condition number of the column-scaled design, as numpy computes it
+    As = A / np.linalg.norm(A, axis=0)
+    assert res.condition == pytest.approx(np.linalg.cond(As), rel=1e-6)
+
+
+def test_qr_fallback_agrees_with_semi_normal_equations(noisy_case, monkeypatch):
+    c = noisy_case
+    fast = calibrate_lstsq(c.model, (c.sig, c.torque))
+    monkeypatch.setattr(lstsq_mod, "CSNE_MAX_COND", 1.0)  # force the Householder QR path
+    slow = calibrate_lstsq(c.model, (c.sig, c.torque))
+    ref = np.asarray(slow.model.coef)
+    np.testing.assert_allclose(np.asarray(fast.model.coef), ref, atol=1e-10 * np.abs(ref).max())
+    assert fast.condition == pytest.approx(slow.condition, rel=1e-6)
+
+
+def test_calibrates_from_a_recording():
+    from tests.helpers import sim_recording
+
+    rec = sim_recording(400)
+    model = ComplianceModel.paper(JOINT, per_segment=False, poly_order=1, kinematic="none")
+    res = calibrate_lstsq(model, rec)
+    # the simulated twist is exactly 3e-5 rad per N·m in every segment (torque +-80 N·m)
+    np.testing.assert_allclose(np.asarray(res.model.k), 3e-5, rtol=1e-6)
+    assert res.model.torque_range == pytest.approx(
+        (float(rec.torque.min()), float(rec.torque.max()))
+    )
+
+
+def test_unreached_segments_are_dropped_and_range_narrowed():
+    sig, torque = make_signals(2000, seed=5)
+    torque = np.clip(torque, -50.0, 85.0)  # never below -60 N·m: segment 0 unreached
+    model = ComplianceModel.paper(JOINT, per_segment=True)
+    truth_case = simulate("x", 10, per_segment=True, seed=5)
+    model = eqx.tree_at(lambda m: m.coef, model, jnp.asarray(truth_case.truth))
+    twist = model.predict_twist(sig, torque)
+    sig = eqx.tree_at(lambda s: s.twist, sig, twist)
+    with pytest.warns(UserWarning, match="left out"):
+        res = calibrate_lstsq(model, (sig, torque))
+    assert any(d.startswith("k3 (no sample reaches torque segment 0)") for d in res.dropped)
+    assert not any(res.model.active[5 : 5 + 19])  # segment 0's own block is left out too
+    assert res.segment_counts[0] == 0 and sum(res.segment_counts) == 2000
+    assert res.model.torque_range == pytest.approx((-50.0, 85.0))
+    assert not res.model.active[0] and float(res.model.coef[0]) == 0.0
+    np.testing.assert_allclose(np.asarray(res.model.k)[1:], truth_case.truth[1:5], rtol=1e-9)
+
+
+# ------------------------------------------------------------------------------------------
+# Bad input
+
+
+def test_constant_current_names_the_polynomial_terms():
+    sig, torque = make_signals(500, seed=8)
+    sig = eqx.tree_at(lambda s: s.current, sig, jnp.full(500, 0.7))
+    sig = eqx.tree_at(lambda s: s.twist, sig, jnp.asarray(3e-5 * torque))
+    model = ComplianceModel.paper(JOINT, per_segment=False, poly_order=3, kinematic="none")
+    with pytest.raises(hdjax.CalibrationError) as err:
+        calibrate_lstsq(model, (sig, torque))
+    msg = str(err.value)
+    assert "rank-deficient" in msg and "rank 6 < 9" in msg
+    for name in ("k0", "w1", "w2", "w3"):
+        assert name in msg
+    assert "constant current" in msg and "add load variation" in msg
+    res = calibrate_lstsq(model, (sig, torque), throw=False)
+    assert res.rank < res.n_terms and any("rank-deficient" in m for m in res.messages)
+
+
+def test_fewer_samples_than_coefficients():
+    c = simulate("small", 60, per_segment=False, seed=9)  # 24 coefficients... with 60 rows ok
+    sig = jax.tree_util.tree_map(lambda x: x[:20], c.sig)
+    with pytest.raises(hdjax.CalibrationError, match="20 samples cannot calibrate 24 coeff"):
+        calibrate_lstsq(c.model, (sig, c.torque[:20]))
+
+
+def test_falling_twist_is_not_invertible_and_suggests_twist_sign():
+    c = simulate("flip", 1500, per_segment=False, seed=10)
+    sig = eqx.tree_at(lambda s: s.twist, c.sig, -c.sig.twist)
+    with pytest.raises(hdjax.InversionError) as err:
+        calibrate_lstsq(c.model, (sig, c.torque))
+    msg = str(err.value)
+    assert "not increasing with torque" in msg and "twist_sign = -1" in msg and "k1=" in msg
+
+
+def test_recording_without_torque_is_refused():
+    from tests.helpers import sim_recording
+
+    rec = sim_recording(50, with_torque=False)
+    with pytest.raises(hdjax.DataError, match="needs a reference 'torque' column"):
+        calibrate_lstsq(ComplianceModel.paper(JOINT), rec)
+
+
+def test_no_recompilation_on_second_call(exact_case):
+    from hdjax.compliance._lstsq import _compact_column_list
+
+    c = exact_case
+    calibrate_lstsq(c.model, (c.sig, c.torque))
+    before = _compact_column_list._cached._cache_size()
+    with warnings.catch_warnings():
+        calibrate_lstsq(c.model, (c.sig, c.torque))
+    assert _compact_column_list._cached._cache_size() == before
