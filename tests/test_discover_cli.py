@@ -23,8 +23,18 @@ def files(tmp_path_factory):
 
 
 def _run(files, out, *extra, train="train.csv", test="test.csv"):
-    argv = ["--train", str(files / train), "--test", str(files / test), "--joint",
-            str(files / "joint.toml"), "--out", str(out), "--quiet", *extra]
+    argv = [
+        "--train",
+        str(files / train),
+        "--test",
+        str(files / test),
+        "--joint",
+        str(files / "joint.toml"),
+        "--out",
+        str(out),
+        "--quiet",
+        *extra,
+    ]
     return cli_main(argv)
 
 
@@ -77,7 +87,10 @@ def test_different_ratios(files, tmp_path, capsys):
     rec = hdjax.load_csv(files / "test.csv")
     other = rec.select(slice(None))
     other = hdjax.make_recording(
-        other.t, np.asarray(other.theta_m) * 100 / 160, other.theta_l, other.current,
+        other.t,
+        np.asarray(other.theta_m) * 100 / 160,
+        other.theta_l,
+        other.current,
         other.torque,
     )
     hdjax.save_csv(other, tmp_path / "test100.csv")
@@ -90,8 +103,9 @@ def test_different_ratios(files, tmp_path, capsys):
 
 def test_test_lacks_a_train_column(files, tmp_path, capsys):
     rec = hdjax.load_csv(files / "train.csv")
-    hdjax.save_csv(rec.with_extras(temperature=np.linspace(20, 30, rec.n_samples)),
-                   files / "train_temp.csv")
+    hdjax.save_csv(
+        rec.with_extras(temperature=np.linspace(20, 30, rec.n_samples)), files / "train_temp.csv"
+    )
     assert _run(files, tmp_path / "o", train="train_temp.csv") == 2
     _one_line_error(capsys, "lacks column", "temperature")
 
@@ -112,7 +126,11 @@ def test_too_short_says_the_length_needed(files, tmp_path, capsys):
     short = rec.select(slice(0, 600))
     theta_l = 0.01 * np.sin(np.linspace(0, 3.0, 600))
     slow = hdjax.make_recording(
-        short.t, 160 * theta_l, theta_l, short.current, short.torque,
+        short.t,
+        160 * theta_l,
+        theta_l,
+        short.current,
+        short.torque,
     )
     assert float(np.ptp(np.asarray(slow.theta_m))) < 4 * np.pi
     hdjax.save_csv(slow, files / "short.csv")
@@ -124,10 +142,23 @@ def test_too_short_says_the_length_needed(files, tmp_path, capsys):
 def test_constant_extra_column(files, tmp_path, capsys):
     for name in ("train.csv", "test.csv"):
         rec = hdjax.load_csv(files / name)
-        hdjax.save_csv(rec.with_extras(temperature=np.full(rec.n_samples, 25.0)),
-                       files / f"const_{name}")
+        hdjax.save_csv(
+            rec.with_extras(temperature=np.full(rec.n_samples, 25.0)), files / f"const_{name}"
+        )
     assert _run(files, tmp_path / "o", train="const_train.csv", test="const_test.csv") == 2
     _one_line_error(capsys, "constant", "temperature", "--ignore-column")
     # and it runs when told to ignore the column
-    assert _run(files, tmp_path / "o2", "--ignore-column", "temperature", "--no-figures",
-                "--max-effects", "1", train="const_train.csv", test="const_test.csv") == 0
+    assert (
+        _run(
+            files,
+            tmp_path / "o2",
+            "--ignore-column",
+            "temperature",
+            "--no-figures",
+            "--max-effects",
+            "1",
+            train="const_train.csv",
+            test="const_test.csv",
+        )
+        == 0
+    )

@@ -56,3 +56,39 @@ def test_column_absorbed_by_the_base_design_is_not_selected():
     # a copy of a base column can explain nothing once made orthogonal to the base
     chosen = sindy_select(a, resid, [a[:, 1], extra[:, 0]], ["dup", "x0"], threshold=0.05)
     assert chosen.tolist() == [False, True]
+
+
+def test_numpy_candidate_columns_equal_the_model_terms():
+    from hdjax.compliance import (
+        Backlash,
+        Column,
+        Coulomb,
+        Harmonics,
+        Hysteresis,
+        Stiffening,
+        Viscous,
+        signals_from_recording,
+    )
+    from hdjax.discover._library import candidate_columns
+
+    from .discover_data import synthetic_recording
+
+    rec = synthetic_recording(1, [("temperature", 0.02)], n=2000)
+    sig = signals_from_recording(rec, 160.0)
+    terms = [
+        Harmonics("theta_m", (2.0, 2 - 2 / 160)),
+        Coulomb("omega_l", 0.05),
+        Viscous("omega_m", 3.0),
+        Column("temperature", 25.0, 3.0),
+        Backlash(8.0),
+        Stiffening(400.0),
+        Hysteresis(20.0),
+    ]
+    for term in terms:
+        # same formulas in NumPy and JAX: agreement to rounding of a few ulps of O(1) values
+        np.testing.assert_allclose(
+            candidate_columns(term, sig, rec.torque),
+            np.asarray(term.columns(sig, rec.torque)),
+            rtol=0,
+            atol=1e-13,
+        )

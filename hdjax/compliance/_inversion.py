@@ -24,8 +24,8 @@ most the jump of $h$ between neighbouring segments divided by the smaller compli
 `in_range` is `torque_range[0] <= T <= torque_range[1]` (the calibrated range).
 
 Effects that depend nonlinearly on the present torque (stiffening, backlash) are then solved
-by safeguarded Newton steps, and effects on the torque path (hysteresis) by a fixed-point
-iteration on the estimated path, causally.
+by safeguarded Newton steps, and effects on the torque path (hysteresis) are driven by the
+torque estimated without them, causally, in one pass.
 """
 
 from __future__ import annotations
@@ -49,7 +49,6 @@ EDGE_TOLERANCE = 1e-9
 """A candidate counts as inside its segment up to this fraction of the rated torque."""
 
 NEWTON_STEPS = 8
-PATH_ITERATIONS = 4
 
 
 class TorqueEstimate(eqx.Module):
@@ -192,14 +191,10 @@ def _estimate_impl(model: ComplianceModel, sig: Signals):
 
     t, seg, amb, unres = solve(r)
     if effects["path"]:
-        # Path-dependent terms (hysteresis) from the estimated torque, causally; fixed point.
-        def body(_, t_prev):
-            r_eff = r
-            for term, c in effects["path"]:
-                r_eff = r_eff - term.columns(sig, t_prev) @ c
-            return solve(r_eff)[0]
-
-        t = jax.lax.fori_loop(0, PATH_ITERATIONS, body, t)
+        # Path-dependent terms (hysteresis) are driven by the torque estimated without them,
+        # causally, in one pass: the same driver the calibration uses (the previous model's
+        # estimate). Iterating to a fixed point instead is unstable once the loop gain
+        # c * dz/dT of a sharp hysteresis exceeds the compliance.
         r_eff = r
         for term, c in effects["path"]:
             r_eff = r_eff - term.columns(sig, t) @ c

@@ -344,23 +344,27 @@ def dahl_state(torque, torque_scale: float):
     Fig. 2, B to B'). Starts at $z_0 = 0$.
     """
 
-    def _step(z, dT):
-        # Dahl: dz = dT/Th * (1 - z sign(dT)); explicit step, clipped for large dT.
-        z = z + dT / torque_scale * (1.0 - z * jnp.sign(dT))
-        z = jnp.clip(z, -1.0, 1.0)
+    dT = jnp.diff(torque, prepend=torque[:1]) / torque_scale
+    return _dahl_scan(dT)
+
+
+@jax.jit
+def _dahl_scan(du):
+    # du = dT / T_h, so one compiled scan serves every torque scale.
+    def _step(z, d):
+        # Dahl: dz = dT/Th * (1 - z sign(dT)); explicit step, clipped for large steps.
+        z = jnp.clip(z + d * (1.0 - z * jnp.sign(d)), -1.0, 1.0)
         return z, z
 
-    dT = jnp.diff(torque, prepend=torque[:1])
-    _, z = jax.lax.scan(_step, jnp.zeros((), torque.dtype), dT)
-    return z
+    return jax.lax.scan(_step, jnp.zeros((), du.dtype), du)[1]
 
 
 @dataclasses.dataclass(frozen=True)
 class Hysteresis:
     """Hysteresis in twist as a Dahl state driven by the torque path ([`dahl_state`][]).
 
-    At estimation the state is driven by the torque being estimated (fixed-point iteration,
-    causal), never by the reference sensor. At calibration it is driven by the signal
+    At estimation the state is driven by the torque being estimated (the estimate without the
+    path terms, causally, one pass), never by the reference sensor. At calibration it is driven by the signal
     `TORQUE_PATH` when present (the residual loop supplies the previous model's estimate), else
     by the reference torque.
     """

@@ -1,5 +1,7 @@
 """The residual loop: find the residual, trace it to a physical effect, add it, report."""
 
+from ._checks import apparent_ratio as apparent_ratio, check_inputs as check_inputs
+from ._cli import build_parser as build_parser, cli_main as cli_main, run as run_command
 from ._library import (
     FAMILIES as FAMILIES,
     Candidate as Candidate,
@@ -14,12 +16,10 @@ from ._loop import (
     discover as discover,
     residual_spectra as residual_spectra,
 )
+from ._report import report_dict as report_dict, write_report as write_report
 from ._select import cv_gain as cv_gain, fold_basis as fold_basis, sindy_select as sindy_select
 from ._spectrum import (
     OrderSpectrum as OrderSpectrum,
     order_spectrum as order_spectrum,
     spectrum_peaks as spectrum_peaks,
 )
-from ._checks import apparent_ratio as apparent_ratio, check_inputs as check_inputs
-from ._cli import build_parser as build_parser, cli_main as cli_main, run as run_command
-from ._report import report_dict as report_dict, write_report as write_report

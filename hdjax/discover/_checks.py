@@ -83,7 +83,11 @@ def check_inputs(
     if span < need:
         dur = float(train.t[-1] - train.t[0])
         speed = span / dur if dur > 0 else 0.0
-        more = f"; at its mean speed of {speed:.3g} rad/s that is {need / speed:.3g} s" if speed else ""
+        more = (
+            f"; at its mean speed of {speed:.3g} rad/s that is {need / speed:.3g} s"
+            if speed
+            else ""
+        )
         raise DataError(
             f"TRAIN is too short to resolve the lowest candidate order {min_order_m:g} of the motor "
             f"angle: theta_m spans {span:.3g} rad but one period of that order needs "

@@ -16,7 +16,7 @@ t = "Timestamp"
 
 [discover]
 max_effects = 5
-min_gain = 0.02
+min_gain = 0.05
 ```
 """
 
@@ -32,8 +32,15 @@ from .._io import ColumnMap, did_you_mean, load_recording
 from .._joint import Joint
 
 _DATA_KEYS = ("path", "train", "test", "test_blocks", "columns", "extras")
-_DISCOVER_KEYS = ("max_effects", "min_gain", "ignore_columns", "n_segments", "poly_order",
-                  "fourier_order", "families")
+_DISCOVER_KEYS = (
+    "max_effects",
+    "min_gain",
+    "ignore_columns",
+    "n_segments",
+    "poly_order",
+    "fourier_order",
+    "families",
+)
 
 
 def load_discover_config(path):

@@ -89,6 +89,29 @@ class LibraryOptions:
     families: tuple[str, ...] = FAMILIES
 
 
+def candidate_columns(term, sig, torque) -> np.ndarray:
+    """A candidate's columns as a NumPy array, computed in NumPy where the term is simple.
+
+    Scoring evaluates dozens of candidates once each; NumPy avoids compiling a JAX program per
+    candidate (their orders and scales are static fields). The result equals `term.columns`.
+    """
+    name = type(term).__name__
+    if name == "Harmonics":
+        th = np.asarray(sig.get(term.signal))
+        return np.column_stack([f(k * th) for k in term.orders for f in (np.cos, np.sin)])
+    if name == "Coulomb":
+        return np.tanh(np.asarray(sig.get(term.signal)) / term.omega_s)[:, None]
+    if name == "Viscous":
+        return (np.asarray(sig.get(term.signal)) / term.scale)[:, None]
+    if name == "Column":
+        return ((np.asarray(sig.get(term.name)) - term.center) / term.scale)[:, None]
+    if name == "Backlash":
+        return np.tanh(np.asarray(torque) / term.width)[:, None]
+    if name == "Stiffening":
+        return ((np.asarray(torque) / term.torque_scale) ** 3)[:, None]
+    return np.asarray(term.columns(sig, torque))
+
+
 def harmonic_key(signal: str, order: float) -> str:
     return f"harmonic:{signal}:{_fmt(round(order, 6))}"
 

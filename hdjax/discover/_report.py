@@ -20,8 +20,8 @@ VOCABULARY = (
 
 STOPPING_RULE = (
     "add the best-ranked candidate selected by pysindy STLSQ that removes at least min_gain of "
-    "the model's cross-validated twist error (5 interleaved folds of the training data) and "
-    "lowers the held-out error in every fold; stop when none qualifies"
+    "the model's cross-validated twist error (5 interleaved folds of the training data) and at "
+    "least half of min_gain in every fold; stop when none qualifies"
 )
 
 
@@ -30,15 +30,24 @@ def report_dict(result: DiscoveryResult, *, extra: dict | None = None) -> dict:
     b, f = result.baseline, result.final
     d = {
         "baseline": {
-            "rms": b.rms, "max": b.max, "rms_pct": b.rms_pct, "max_pct": b.max_pct,
+            "rms": b.rms,
+            "max": b.max,
+            "rms_pct": b.rms_pct,
+            "max_pct": b.max_pct,
             "twist_rms_arcsec": result.baseline_twist_rms_arcsec,
         },
         "steps": [
             {
-                "effect": s.key, "rms": s.test.rms, "max": s.test.max,
-                "rms_pct": s.test.rms_pct, "max_pct": s.test.max_pct,
-                "twist_rms_arcsec": s.twist_rms_arcsec, "cv_gain": s.cv_gain,
-                "fold_gains": s.fold_gains, "term": s.term.names(), "ranking": s.ranking,
+                "effect": s.key,
+                "rms": s.test.rms,
+                "max": s.test.max,
+                "rms_pct": s.test.rms_pct,
+                "max_pct": s.test.max_pct,
+                "twist_rms_arcsec": s.twist_rms_arcsec,
+                "cv_gain": s.cv_gain,
+                "fold_gains": s.fold_gains,
+                "term": s.term.names(),
+                "ranking": s.ranking,
             }
             for s in result.steps
         ],

@@ -19,6 +19,8 @@ import scipy.linalg
 
 from .._errors import HdjaxError
 
+MAX_SINDY_ROWS = 20000
+
 
 @dataclasses.dataclass(frozen=True)
 class FoldBasis:
@@ -68,7 +70,13 @@ def fold_basis(a: np.ndarray, y: np.ndarray, n_folds: int = 5, block: int = 200)
         out["ate"].append(a[te][:, keep])
         sse.append(np.sum(e0**2))
     return FoldBasis(
-        out["train"], tests, out["q"], out["r"], out["rtr"], out["rte"], out["ate"],
+        out["train"],
+        tests,
+        out["q"],
+        out["r"],
+        out["rtr"],
+        out["rte"],
+        out["ate"],
         np.asarray(sse),
     )
 
@@ -93,9 +101,13 @@ def cv_gains(basis: FoldBasis, groups: list[np.ndarray]) -> list[tuple[float, np
         qtc = q.T @ ct
         c_perp = ct - q @ qtc
         c_te = cols[te] - basis.a_test[f] @ scipy.linalg.solve_triangular(r, qtc)
+        # Each group has a column or two: solve its small least-squares problem from the
+        # Gram blocks of the (already orthogonalised, unit-scaled) columns.
+        gram = c_perp.T @ c_perp
+        rhs = c_perp.T @ basis.resid_train[f]
         for i in range(len(groups)):
             sl = slice(bounds[i], bounds[i + 1])
-            gamma = scipy.linalg.lstsq(c_perp[:, sl], basis.resid_train[f])[0]
+            gamma = np.linalg.lstsq(gram[sl, sl], rhs[sl], rcond=1e-12)[0]
             e = basis.resid_test[f] - c_te[:, sl] @ gamma
             sse[i, f] = np.sum(e**2)
     per_fold = 1.0 - sse / basis.base_sse[None, :]
@@ -128,8 +140,11 @@ def sindy_select(
         import pysindy as ps
     except ImportError as err:  # pragma: no cover - pysindy is a dependency
         raise HdjaxError("pysindy is required for the residual loop: pip install pysindy") from err
+    # The selection needs no more than a few ten thousand rows: take evenly spaced samples.
+    step = max(1, a.shape[0] // MAX_SINDY_ROWS)
+    a, residual = a[::step], residual[::step]
     q, _ = np.linalg.qr(_scaled(a))
-    lib = np.column_stack(columns)
+    lib = np.column_stack([c[::step] for c in columns])
     lib = lib - q @ (q.T @ lib)
     rms = np.sqrt(np.mean(lib**2, axis=0))
     ok = rms > 1e-12 * max(rms.max(), 1e-300)
