@@ -89,8 +89,8 @@ def check_inputs(
             else ""
         )
         raise DataError(
-            f"TRAIN is too short to resolve the lowest candidate order {min_order_m:g} of the motor "
-            f"angle: theta_m spans {span:.3g} rad but one period of that order needs "
+            f"TRAIN is too short to resolve the lowest candidate order {min_order_m:g} of the "
+            f"motor angle: theta_m spans {span:.3g} rad but one period of that order needs "
             f"{need:.3g} rad{more} (the recording lasts {dur:.3g} s)"
         )
     for name in ignore_columns:

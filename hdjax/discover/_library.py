@@ -2,17 +2,18 @@
 
 Each candidate is a term group of [`hdjax.compliance`][] with a key from a fixed vocabulary:
 
-| key | term | physical effect |
-|---|---|---|
-| `harmonic:theta_m:K` | $\\cos K\\theta_m, \\sin K\\theta_m$ | kinematic error of the wave generator side (order $K$, decimal) |
-| `harmonic:theta_l:K` | $\\cos K\\theta_l, \\sin K\\theta_l$ | kinematic error of the output side |
-| `coulomb:omega_m`, `coulomb:omega_l` | $\\tanh(\\omega/\\omega_s)$ | Coulomb / Stribeck friction between current and wave generator, or at the output bearing |
-| `viscous:omega_m`, `viscous:omega_l` | $\\omega$ | viscous friction |
-| `hysteresis:torque` | Dahl state of the torque path | hysteresis of the flexspline / wave generator |
-| `backlash:torque` | $\\tanh(T/T_b)$ | lost motion around zero torque |
-| `stiffness:torque` | $(T/\\tau_0)^3$ | stiffness beyond the piecewise segments |
-| `column:NAME` | $(x - \\bar x)/s_x$ | a drift with an extra column (e.g. temperature) |
-| `column:NAME*torque` | $(x - \\bar x)/s_x \\cdot T/\\tau_0$ | a compliance that drifts with it |
+- `harmonic:theta_m:K`: $\\cos K\\theta_m, \\sin K\\theta_m$, kinematic error of the wave
+  generator side (order $K$, decimal);
+- `harmonic:theta_l:K`: $\\cos K\\theta_l, \\sin K\\theta_l$, kinematic error of the output;
+- `coulomb:omega_m`, `coulomb:omega_l`: $\\tanh(\\omega/\\omega_s)$, Coulomb / Stribeck
+  friction between current and wave generator, or at the output bearing;
+- `viscous:omega_m`, `viscous:omega_l`: $\\omega$, viscous friction;
+- `hysteresis:torque`: a Dahl state of the torque path, hysteresis of flexspline and wave
+  generator;
+- `backlash:torque`: $\\tanh(T/T_b)$, lost motion around zero torque;
+- `stiffness:torque`: $(T/\\tau_0)^3$, stiffness beyond the piecewise segments;
+- `column:NAME`: $(x - \\bar x)/s_x$, a drift with an extra column (e.g. temperature);
+- `column:NAME*torque`: $(x - \\bar x)/s_x \\cdot T/\\tau_0$, a compliance that drifts with it.
 
 Harmonic orders come from the order spectrum of the residual (peaks, refined), merged with the
 integers and the combination orders $2 \\pm 2/N$; an order is offered only when the recording
