@@ -208,7 +208,7 @@ def _test_errors(model, test, rated):
 
 
 def _twist_rms(model, data) -> float:
-    sig, torque = prepare(model, data)
+    sig, torque = training_data(model, data)  # path terms driven as at calibration
     r = np.asarray(sig.twist) - np.asarray(model.predict_twist(sig, torque))
     return float(np.sqrt(np.mean(r**2)) * ARCSEC)
 
@@ -373,7 +373,7 @@ def discover(
         final=final,
         final_spectra=spectra,
         final_ranking=ranking,
-        notes=notes,
+        notes=list(dict.fromkeys(notes)),
         test=test,
         train_residual_final=resid,
         seconds=time.perf_counter() - t_start,

@@ -117,17 +117,29 @@ def _plot_torque(result: DiscoveryResult, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from .._features import find_gaps
+
     test = result.test
-    t = np.asarray(test.t) - float(test.t[0])
-    ref = np.asarray(test.torque)
     final = result.steps[-1].torque_estimate if result.steps else result.baseline_estimate
+    series = [
+        np.asarray(x, float)
+        for x in (
+            np.asarray(test.t) - float(test.t[0]),
+            test.torque,
+            result.baseline_estimate,
+            final,
+        )
+    ]
+    # break the lines across gaps in the record (held-out blocks, lost samples)
+    gaps = find_gaps(series[0]) + 1
+    t, ref, base, final = (np.insert(x, gaps, np.nan) for x in series)
     fig, axes = plt.subplots(2, 1, figsize=(10, 5), sharex=True)
     axes[0].plot(t, ref, "k", lw=1, label="measured")
-    axes[0].plot(t, result.baseline_estimate, lw=0.8, label="estimated, starting model")
+    axes[0].plot(t, base, lw=0.8, label="estimated, starting model")
     axes[0].plot(t, final, lw=0.8, label="estimated, final model")
     axes[0].set_ylabel("torque [N·m]")
     axes[0].legend(fontsize=8)
-    axes[1].plot(t, result.baseline_estimate - ref, lw=0.6, label="starting model")
+    axes[1].plot(t, base - ref, lw=0.6, label="starting model")
     axes[1].plot(t, final - ref, lw=0.6, label="final model")
     axes[1].set_ylabel("error [N·m]")
     axes[1].set_xlabel("time [s]")
