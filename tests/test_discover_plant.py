@@ -24,7 +24,7 @@ from hdjax.discover._loop import _calibrate_monotone, _test_errors, calibrate_ba
 
 ARCMIN = math.pi / (180 * 60)
 JOINT = hdjax.Joint(ratio=160, rated_torque=400)
-DURATION = 20.0
+DURATION = 30.0
 
 pytestmark = pytest.mark.slow
 

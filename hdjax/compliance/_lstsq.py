@@ -374,7 +374,7 @@ def check_invertible(model: ComplianceModel) -> str:
         if a and not kj > 0
     ]
     if not bad:
-        return ""
+        return _check_nonlinear_slope(model, k)
     hint = ""
     if all(kj < 0 for kj, a in zip(k, model.active) if a):
         hint = (
@@ -384,4 +384,33 @@ def check_invertible(model: ComplianceModel) -> str:
     return (
         "the calibrated compliance is not increasing with torque, so it cannot be inverted "
         f"(eq. (27)): {', '.join(bad)}.{hint}"
+    )
+
+
+def _check_nonlinear_slope(model: ComplianceModel, k: np.ndarray) -> str:
+    """With effect terms nonlinear in torque (stiffening, backlash), the total slope
+    $d\\Delta\\theta/dT$ must stay positive over the rated range (checked on a grid)."""
+    terms, i = [], model.n_coef - model.n_effect
+    for term in model.effect_terms:
+        m = len(term.names())
+        if term.torque_kind == "memoryless":
+            terms.append((term, float(np.asarray(model.coef)[i])))
+        i += m
+    if not terms:
+        return ""
+    lo = min(model.torque_range[0], -model.rated_torque)
+    hi = max(model.torque_range[1], model.rated_torque)
+    grid = np.linspace(lo, hi, 801)
+    seg = np.searchsorted(np.asarray(model.knots), grid, side="right")
+    act = np.asarray(model.active[: model.n_segments])
+    slope = np.where(act[seg], k[seg], np.nan)
+    for term, c in terms:
+        slope = slope + c * np.asarray(term.value_and_slope(grid)[1])
+    worst = np.nanargmin(slope)
+    if slope[worst] > 0:
+        return ""
+    return (
+        "the calibrated compliance is not increasing with torque once "
+        f"{', '.join(t.key for t, _ in terms)} is added: its slope is {slope[worst]:.3g} "
+        f"rad/(N·m) at {grid[worst]:.4g} N·m, so it cannot be inverted over the rated range"
     )
