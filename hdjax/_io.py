@@ -27,6 +27,23 @@ from ._recording import SIGNAL_COLUMNS, Recording, make_recording
 _COLUMN_KEYS = ("source", "scale", "offset", "counts_per_rev", "modulus")
 
 
+def read_toml(path) -> dict:
+    """Parse a TOML file; a missing file or a syntax error becomes a `ConfigError` naming the
+    file, line and column."""
+    import re
+    import tomllib
+
+    path = Path(path)
+    if not path.exists():
+        raise ConfigError(f"{path}: no such file")
+    try:
+        return tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        m = re.search(r"\(at line (\d+), column (\d+)\)", str(err))
+        where = f"{path}:{m.group(1)}:{m.group(2)}" if m else str(path)
+        raise ConfigError(f"{where}: not valid TOML: {err}") from None
+
+
 def did_you_mean(name: str, options) -> str:
     """A ` (did you mean 'x'?)` hint, or an empty string when nothing is close."""
     options = list(options)

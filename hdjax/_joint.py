@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 
 from ._errors import ConfigError
-from ._io import did_you_mean
+from ._io import did_you_mean, read_toml
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,12 +81,7 @@ def _check_positive(key: str, value) -> None:
 def load_joint(path) -> Joint:
     """Read a [`hdjax.Joint`][] from the `[joint]` table of a TOML file."""
     path = Path(path)
-    if not path.exists():
-        raise ConfigError(f"{path}: no such file")
-    try:
-        doc = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{path}: not valid TOML: {err}") from None
+    doc = read_toml(path)
     if "joint" not in doc:
         raise ConfigError(f"{path}: no [joint] table (it needs at least ratio and rated_torque)")
     return Joint.from_dict(doc["joint"], where=f"{path} [joint]")

@@ -72,13 +72,7 @@ def _base_h(model: ComplianceModel, sig: Signals) -> list:
     Built column by column with scalar coefficients so XLA fuses it into one elementwise loop
     (no `n x n_terms` design is materialised).
     """
-    cols = []
-    for term in model.base_terms:
-        if hasattr(term, "column_list"):
-            cols += term.column_list(sig)
-        else:
-            block = term.columns(sig)
-            cols += [block[:, j] for j in range(block.shape[1])]
+    cols = model.base_column_list(sig)
     coef = model.base_coef
     rows = coef.shape[0]
     if not cols:

@@ -103,12 +103,7 @@ def _compact_column_list(model: ComplianceModel, sig: Signals, torque):
     10x slower than computing them), so the stacking is left to NumPy.
     """
     cols = [jnp.clip(torque, lo, hi) - min(max(0.0, lo), hi) for lo, hi in model.segment_bounds]
-    for term in model.base_terms:
-        if hasattr(term, "column_list"):
-            cols += term.column_list(sig)
-        else:
-            block = term.columns(sig)
-            cols += [block[:, j] for j in range(block.shape[1])]
+    cols += model.base_column_list(sig)
     for term in model.effect_terms:
         block = term.columns(sig, torque)
         cols += [block[:, j] for j in range(block.shape[1])]

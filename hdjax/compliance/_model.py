@@ -287,6 +287,17 @@ class ComplianceModel(eqx.Module):
             seg = seg + (torque >= knot).astype(jnp.int32)
         return seg
 
+    def base_column_list(self, sig: Signals) -> list:
+        """The base terms' columns as separate 1-D arrays (XLA fuses them; no stacking)."""
+        cols = []
+        for term in self.base_terms:
+            if hasattr(term, "column_list"):
+                cols += term.column_list(sig)
+            else:
+                block = term.columns(sig)
+                cols += [block[:, j] for j in range(block.shape[1])]
+        return cols
+
     def base_columns(self, sig: Signals) -> Float[Array, "n n_base"]:
         """Columns of the base terms (shared layout, before per-segment expansion)."""
         if not self.base_terms:

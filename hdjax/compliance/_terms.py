@@ -364,9 +364,9 @@ class Hysteresis:
     """Hysteresis in twist as a Dahl state driven by the torque path ([`dahl_state`][]).
 
     At estimation the state is driven by the torque being estimated (the estimate without the
-    path terms, causally, one pass), never by the reference sensor. At calibration it is driven by the signal
-    `TORQUE_PATH` when present (the residual loop supplies the previous model's estimate), else
-    by the reference torque.
+    path terms, causally, one pass), never by the reference sensor. At calibration it is
+    driven by the signal `TORQUE_PATH` when present (the residual loop supplies the previous
+    model's estimate), else by the reference torque.
     """
 
     torque_scale: float = 1.0

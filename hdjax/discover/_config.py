@@ -22,13 +22,12 @@ min_gain = 0.05
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
 import numpy as np
 
 from .._errors import ConfigError
-from .._io import ColumnMap, did_you_mean, load_recording
+from .._io import ColumnMap, did_you_mean, load_recording, read_toml
 from .._joint import Joint
 
 _DATA_KEYS = ("path", "train", "test", "test_blocks", "columns", "extras")
@@ -46,12 +45,7 @@ _DISCOVER_KEYS = (
 def load_discover_config(path):
     """Read a discover experiment: returns `(train, test, joint, options dict, notes)`."""
     path = Path(path)
-    if not path.exists():
-        raise ConfigError(f"{path}: no such file")
-    try:
-        doc = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{path}: not valid TOML: {err}") from None
+    doc = read_toml(path)
     for key in doc:
         if key not in ("joint", "data", "discover"):
             raise ConfigError(
