@@ -26,8 +26,11 @@ def _signals(n=4000, seed=0):
     torque = 350 * np.sin(2 * np.pi * 0.1 * t) + 20 * rng.standard_normal(n)
     z = jnp.asarray(np.zeros(n))
     sig = Signals(
-        twist=z, current=jnp.asarray(torque / 16.0), theta_m=jnp.asarray(50 * np.sin(0.3 * t)),
-        theta_l=jnp.asarray(0.3 * np.sin(0.3 * t)), omega_m=jnp.asarray(15 * np.cos(0.3 * t)),
+        twist=z,
+        current=jnp.asarray(torque / 16.0),
+        theta_m=jnp.asarray(50 * np.sin(0.3 * t)),
+        theta_l=jnp.asarray(0.3 * np.sin(0.3 * t)),
+        omega_m=jnp.asarray(15 * np.cos(0.3 * t)),
         omega_l=jnp.asarray(0.09 * np.cos(0.3 * t)),
         extras={"temperature": jnp.asarray(25 + 5 * np.sin(0.05 * t))},
     )
@@ -35,14 +38,16 @@ def _signals(n=4000, seed=0):
 
 
 def _model_with(*terms, effect_coef):
-    m = ComplianceModel.paper(JOINT, per_segment=False, poly_order=2, current_scale=25.0,
-                              kinematic="none").with_effects(*terms)
+    m = ComplianceModel.paper(
+        JOINT, per_segment=False, poly_order=2, current_scale=25.0, kinematic="none"
+    ).with_effects(*terms)
     coef = np.zeros(m.n_coef)
     coef[: m.n_segments] = np.array([0.9, 1.0, 1.2, 1.0, 0.9]) / 6.7e4
     coef[m.n_segments : m.n_segments + 3] = [1e-5, 2e-5, -1e-5]
     coef[m.n_coef - m.n_effect :] = effect_coef
-    return m.__class__(**{**{f: getattr(m, f) for f in m.__dataclass_fields__},
-                          "coef": jnp.asarray(coef)})
+    return m.__class__(
+        **{**{f: getattr(m, f) for f in m.__dataclass_fields__}, "coef": jnp.asarray(coef)}
+    )
 
 
 @pytest.mark.parametrize(
@@ -58,8 +63,15 @@ def test_forward_then_inverse_returns_the_torque(terms, coef):
     sig, torque = _signals()
     model = _model_with(*terms, effect_coef=coef)
     twist = model.predict_twist(sig, jnp.asarray(torque))
-    sig = Signals(twist=twist, current=sig.current, theta_m=sig.theta_m, theta_l=sig.theta_l,
-                  omega_m=sig.omega_m, omega_l=sig.omega_l, extras=sig.extras)
+    sig = Signals(
+        twist=twist,
+        current=sig.current,
+        theta_m=sig.theta_m,
+        theta_l=sig.theta_l,
+        omega_m=sig.omega_m,
+        omega_l=sig.omega_l,
+        extras=sig.extras,
+    )
     est = np.asarray(estimate_torque(model, sig).torque)
     # exact model, noiseless: only rounding and the Newton tolerance remain
     np.testing.assert_allclose(est, torque, atol=1e-6)

@@ -1,0 +1,25 @@
+"""Joint gradient fitting of compliance model, network and plant parameters (issue 4)."""
+
+from ._compare import (
+    METHOD_NAMES as METHOD_NAMES,
+    compare_methods as compare_methods,
+    format_table as format_table,
+    plot_comparison as plot_comparison,
+)
+from ._hybrid import (
+    PLANT_FIELDS as PLANT_FIELDS,
+    HybridFit as HybridFit,
+    HybridInputs as HybridInputs,
+    HybridModel as HybridModel,
+    fit_hybrid as fit_hybrid,
+    hybrid_inputs as hybrid_inputs,
+    make_hybrid as make_hybrid,
+    predict_hybrid as predict_hybrid,
+)
+from ._linear import (
+    METHODS as METHODS,
+    GradientFit as GradientFit,
+    LinearProblem as LinearProblem,
+    fit_compliance_gradient as fit_compliance_gradient,
+    linear_problem as linear_problem,
+)

@@ -1,0 +1,35 @@
+"""Torque from a recording with a trained network (Song et al. 2019, end of Section III.B)."""
+
+from __future__ import annotations
+
+from .._custom_types import Array, Float
+from .._errors import ModelMismatchError
+from .._joint import Joint
+from .._recording import Recording
+from ._features import build_features
+from ._mlp import Network, predict
+
+
+def estimate_torque(network: Network, recording: Recording, joint: Joint) -> Float[Array, " n"]:
+    """Estimate the output torque of every sample of `recording` with a trained network.
+
+    The input vector is built with the options the network was trained with (its stored
+    [`hdjax.network.FeatureLayout`][]: periodic angles, orders, Kalman-filtered current).
+
+    **Arguments:**
+
+    - `network`: a trained [`hdjax.network.Network`][].
+    - `recording`: the [`hdjax.Recording`][] to estimate on (no torque needed).
+    - `joint`: the [`hdjax.Joint`][].
+
+    **Returns:** torque [N·m], shape `(n,)`.
+    """
+    if not isinstance(network, Network):
+        raise ModelMismatchError(
+            f"estimate_torque needs an hdjax.network.Network, got {type(network).__name__}"
+        )
+    lay = network.layout
+    feats = build_features(
+        recording, joint, periodic=lay.periodic, orders=lay.orders or (1, 2), kalman=lay.kalman
+    )
+    return predict(network, feats)
