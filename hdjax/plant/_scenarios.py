@@ -124,6 +124,21 @@ def _check_name(name):
         )
 
 
+def _prepare(names, params, effects, duration, dt) -> PlantParams:
+    """Checks shared by the single and batched runs; the plant with its effects applied."""
+    for name in names:
+        _check_name(name)
+    params = song_params() if params is None else params
+    if effects:
+        params = with_effects(params, effects)
+    if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
+        raise ConfigError(
+            f"scenario duration must be a positive number of seconds, got {duration!r}"
+        )
+    check_step(params, dt)
+    return params
+
+
 def simulate_scenario(
     name: str,
     *,
@@ -150,15 +165,7 @@ def simulate_scenario(
 
     **Returns:** an [`hdjax.Recording`][] with `source` set to `"scenario:<name>"`.
     """
-    _check_name(name)
-    params = song_params() if params is None else params
-    if effects:
-        params = with_effects(params, effects)
-    if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
-        raise ConfigError(
-            f"scenario duration must be a positive number of seconds, got {duration!r}"
-        )
-    check_step(params, dt)
+    params = _prepare((name,), params, effects, duration, dt)
     n_steps = int(round(duration / dt))
     if n_steps < 4:
         raise ConfigError(f"duration {duration} s gives only {n_steps} steps of {dt} s")
@@ -202,16 +209,7 @@ def simulate_scenarios(
     from ._sensors import SensorConfig
 
     names = tuple(names)
-    for name in names:
-        _check_name(name)
-    params = song_params() if params is None else params
-    if effects:
-        params = with_effects(params, effects)
-    if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
-        raise ConfigError(
-            f"scenario duration must be a positive number of seconds, got {duration!r}"
-        )
-    check_step(params, dt)
+    params = _prepare(names, params, effects, duration, dt)
     stride = output_period / dt
     if not (abs(stride - round(stride)) < 1e-9 and round(stride) >= 1):
         raise ConfigError(
