@@ -26,6 +26,7 @@ from hdjax.compliance import (
     Coulomb,
     Harmonics,
     Hysteresis,
+    TwistRate,
     Viscous,
 )
 from hdjax.discover import DiscoverOptions, discover
@@ -102,6 +103,13 @@ CASES = {
         "temperature",
     ),
     "backlash": ("slow", {"backlash": True}, {}, "backlash:torque", Backlash(width=8.0)),
+    "damping": (
+        "fast",
+        {},
+        {"damping": 200.0},
+        "damping:twist_rate",
+        TwistRate(ratio=160.0),
+    ),
     "two": (
         "slow",
         {

@@ -35,6 +35,7 @@ from ._terms import (
     Hysteresis as Hysteresis,
     PaperFourier as PaperFourier,
     Stiffening as Stiffening,
+    TwistRate as TwistRate,
     Viscous as Viscous,
     dahl_state as dahl_state,
 )

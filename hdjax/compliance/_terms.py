@@ -245,6 +245,26 @@ class Viscous:
 
 
 @dataclasses.dataclass(frozen=True)
+class TwistRate:
+    """Structural damping signature: the twist rate $\\dot{\\Delta\\theta} = s(\\omega_l -
+    \\omega_m/N)$ (eq. (5) differentiated), divided by `scale`. A damped flexspline carries
+    $c\\dot{\\Delta\\theta}$ on top of its elastic torque, which the twist alone cannot show."""
+
+    ratio: float = 1.0
+    sign: float = 1.0
+    scale: float = 1.0
+    key: str = "damping:twist_rate"
+    torque_kind: str = "none"
+
+    def names(self) -> tuple[str, ...]:
+        return (f"twist_rate/{_fmt(self.scale)}",)
+
+    def columns(self, sig: Signals, torque=None):
+        rate = self.sign * (sig.omega_l - sig.omega_m / self.ratio)
+        return (rate / self.scale)[:, None]
+
+
+@dataclasses.dataclass(frozen=True)
 class Column:
     """An extra recording column (e.g. `temperature`), centred and scaled: a twist drift."""
 
@@ -390,6 +410,7 @@ TERM_TYPES = (
     Harmonics,
     Coulomb,
     Viscous,
+    TwistRate,
     Column,
     ColumnTimesTorque,
     Stiffening,

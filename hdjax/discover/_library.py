@@ -12,6 +12,7 @@ Each candidate is a term group of [`hdjax.compliance`][] with a key from a fixed
   generator;
 - `backlash:torque`: $\\tanh(T/T_b)$, lost motion around zero torque;
 - `stiffness:torque`: $(T/\\tau_0)^3$, stiffness beyond the piecewise segments;
+- `damping:twist_rate`: $s(\\omega_l - \\omega_m/N)$, structural damping of the flexspline;
 - `column:NAME`: $(x - \\bar x)/s_x$, a drift with an extra column (e.g. temperature);
 - `column:NAME*torque`: $(x - \\bar x)/s_x \\cdot T/\\tau_0$, a compliance that drifts with it.
 
@@ -37,6 +38,7 @@ from ..compliance import (
     Harmonics,
     Hysteresis,
     Stiffening,
+    TwistRate,
     Viscous,
 )
 from ..compliance._terms import _fmt
@@ -52,6 +54,7 @@ FAMILIES = (
     "hysteresis:torque",
     "backlash:torque",
     "stiffness:torque",
+    "damping:twist_rate",
     "column",
 )
 
@@ -186,6 +189,7 @@ def build_library(
     existing_terms: tuple = (),
     options: LibraryOptions = LibraryOptions(),
     extra_columns: tuple[str, ...] = (),
+    twist_sign: float = 1.0,
 ) -> tuple[list[Candidate], dict[str, OrderSpectrum]]:
     """All candidate effects for the present residual, and the order spectra used.
 
@@ -242,6 +246,12 @@ def build_library(
     if "stiffness:torque" in fams and "stiffness:torque" not in existing_keys:
         term = Stiffening(torque_scale=float(rated_torque))
         cands.append(Candidate(term.key, term.key, term))
+    if "damping:twist_rate" in fams and "damping:twist_rate" not in existing_keys:
+        rate = np.asarray(sig.omega_l) - np.asarray(sig.omega_m) / ratio
+        rms = float(np.sqrt(np.mean(rate**2)))
+        if rms > 0.0:
+            term = TwistRate(ratio=float(ratio), sign=float(twist_sign), scale=float(f"{rms:.4g}"))
+            cands.append(Candidate(term.key, term.key, term))
     if "column" in fams:
         for name in extra_columns:
             x = np.asarray(sig.get(name))

@@ -246,6 +246,7 @@ def score_candidates(model, train, options: DiscoverOptions, extra_columns):
         existing_terms=model.effect_terms,
         options=options.library,
         extra_columns=extra_columns,
+        twist_sign=model.twist_sign,
     )
     if not cands:
         return [], spectra, resid

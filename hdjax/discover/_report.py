@@ -15,7 +15,7 @@ from ._loop import ARCSEC, DiscoveryResult, residual_spectra
 VOCABULARY = (
     "harmonic:theta_m:ORDER, harmonic:theta_l:ORDER, coulomb:omega_m, coulomb:omega_l, "
     "viscous:omega_m, viscous:omega_l, hysteresis:torque, backlash:torque, stiffness:torque, "
-    "column:NAME, column:NAME*torque"
+    "damping:twist_rate, column:NAME, column:NAME*torque"
 )
 
 STOPPING_RULE = (
