@@ -187,19 +187,24 @@ class ComplianceModel(eqx.Module):
             **static,
         )
 
-    def with_effects(self, *terms) -> ComplianceModel:
-        """The same structure with further effect groups (coefficients reset to zero)."""
+    def restructured(self, *, knots=None, effect_terms=None) -> ComplianceModel:
+        """The same joint and base terms with other knots and/or effect groups (coefficients
+        reset to zero, every term active)."""
         return ComplianceModel.build(
             ratio=self.ratio,
             rated_torque=self.rated_torque,
             twist_sign=self.twist_sign,
-            knots=self.knots,
+            knots=self.knots if knots is None else tuple(knots),
             torque_range=self.torque_range,
             velocity=self.velocity,
             base_terms=self.base_terms,
-            effect_terms=self.effect_terms + tuple(terms),
+            effect_terms=self.effect_terms if effect_terms is None else tuple(effect_terms),
             per_segment=self.per_segment,
         )
+
+    def with_effects(self, *terms) -> ComplianceModel:
+        """The same structure with further effect groups (coefficients reset to zero)."""
+        return self.restructured(effect_terms=self.effect_terms + tuple(terms))
 
     # -- structure ---------------------------------------------------------------------------
 

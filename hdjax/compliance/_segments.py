@@ -59,15 +59,4 @@ def merge_sparse_segments(
             break
     if not notes:
         return model, notes
-    new = ComplianceModel.build(
-        ratio=model.ratio,
-        rated_torque=model.rated_torque,
-        twist_sign=model.twist_sign,
-        knots=tuple(knots),
-        torque_range=model.torque_range,
-        velocity=model.velocity,
-        base_terms=model.base_terms,
-        effect_terms=model.effect_terms,
-        per_segment=model.per_segment,
-    )
-    return new, notes
+    return model.restructured(knots=knots), notes

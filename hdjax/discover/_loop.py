@@ -116,17 +116,7 @@ def _merge_knot(model: ComplianceModel, j: int) -> ComplianceModel:
     """Remove the knot between segment `j` and its neighbour towards 0 N·m."""
     lo, hi = model.segment_bounds[j]
     knot = lo if lo > 0.0 else hi
-    return ComplianceModel.build(
-        ratio=model.ratio,
-        rated_torque=model.rated_torque,
-        twist_sign=model.twist_sign,
-        knots=tuple(k for k in model.knots if k != knot),
-        torque_range=model.torque_range,
-        velocity=model.velocity,
-        base_terms=model.base_terms,
-        effect_terms=model.effect_terms,
-        per_segment=model.per_segment,
-    )
+    return model.restructured(knots=[k for k in model.knots if k != knot])
 
 
 def _calibrate_monotone(model, train, notes):
