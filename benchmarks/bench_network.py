@@ -9,6 +9,11 @@ Targets:
   (Song et al. 2019, Section IV.B, i7-7700H), i.e. at most 0.509 us per estimate.
 
 Run: `python benchmarks/bench_network.py [--hidden 20] [--n-train 6000]`; prints JSON.
+
+`--periodic` measures instead what the periodic angle features (sin/cos of the angles, beyond the
+paper) do on plant data, with the plant's kinematic error on and off
+([`hdjax.fit.periodic_features_effect`][]); writes `periodic_features.json` to `--out`, prints
+the JSON and a Markdown table. `--duration` sets the seconds per scenario recording.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ import platform
 import time
 import timeit
 import warnings
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -175,14 +181,52 @@ def bench_estimation(network, n=100_000):
     }
 
 
+def _machine():
+    return {
+        "platform": platform.platform(),
+        "processor": platform.processor(),
+        "cpus": os.cpu_count(),
+        "jax": jax.__version__,
+        "backend": jax.default_backend(),
+    }
+
+
+def bench_periodic(args):
+    from hdjax import fit
+
+    t0 = time.perf_counter()
+    hidden = (32,) if args.hidden is None else tuple(args.hidden)
+    result = fit.periodic_features_effect(
+        duration=args.duration, hidden=hidden, steps=args.steps, verbose=True
+    )
+    result["total_time_s"] = time.perf_counter() - t0
+    result["machine"] = _machine()
+    result["precision"] = "float64"
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "periodic_features.json").write_text(json.dumps(result, indent=2))
+    print(json.dumps(result["summary"], indent=2))
+    print(fit.format_periodic_table(result))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--hidden", type=int, nargs="+", default=[20])
+    ap.add_argument(
+        "--hidden", type=int, nargs="+", default=None, help="default 20 (32 with --periodic)"
+    )
     ap.add_argument("--n-train", type=int, default=6000)
     ap.add_argument("--lr", type=float, default=1e-2)
     ap.add_argument("--epochs", type=int, default=200)
     ap.add_argument("--batch", type=int, default=200)
+    ap.add_argument("--periodic", action="store_true", help="measure the periodic features")
+    ap.add_argument("--duration", type=float, default=60.0, help="with --periodic: s/scenario")
+    ap.add_argument("--steps", type=int, default=4000, help="with --periodic: Adam steps")
+    ap.add_argument("--out", default="benchmarks/results", help="with --periodic: JSON folder")
     args = ap.parse_args()
+    if args.periodic:
+        bench_periodic(args)
+        return
+    args.hidden = [20] if args.hidden is None else args.hidden
     train, net, _ = bench_training(
         tuple(args.hidden), args.n_train, args.lr, args.epochs, args.batch
     )
@@ -190,13 +234,7 @@ def main():
     print(
         json.dumps(
             {
-                "machine": {
-                    "platform": platform.platform(),
-                    "processor": platform.processor(),
-                    "cpus": os.cpu_count(),
-                    "jax": jax.__version__,
-                    "backend": jax.default_backend(),
-                },
+                "machine": _machine(),
                 "precision": "float64",
                 "training": train,
                 "estimation": est,

@@ -6,7 +6,9 @@ parameters: RMS and maximum error (N·m and % of rated torque), fit time and est
 sample, on test recordings independent of the training recordings.
 
 Run: `python benchmarks/compare_methods.py [--duration 60] [--steps 4000] [--out DIR]`; writes
-`compare_methods.json` and `compare_methods.png` to `--out` and prints the JSON.
+`compare_methods.json` and `compare_methods.png` to `--out` and prints the JSON. `--paper-hybrid`
+gives the hybrid and joint fits the linear rows' compliance structure (with the current
+polynomial) and the paper's inputs only, as the first version of this comparison did.
 """
 
 from __future__ import annotations
@@ -30,12 +32,21 @@ def main():
     ap.add_argument("--steps", type=int, default=4000, help="Adam steps of hybrid/joint fits")
     ap.add_argument("--hidden", type=int, nargs="+", default=[32])
     ap.add_argument("--out", default="benchmarks/results")
+    ap.add_argument(
+        "--paper-hybrid",
+        action="store_true",
+        help="hybrid/joint without the dynamic inputs and with the current polynomial",
+    )
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     result = fit.compare_methods(
-        duration=args.duration, steps=args.steps, hidden=tuple(args.hidden), verbose=True
+        duration=args.duration,
+        steps=args.steps,
+        hidden=tuple(args.hidden),
+        dynamic=not args.paper_hybrid,
+        verbose=True,
     )
     result["total_time_s"] = time.perf_counter() - t0
     result["machine"] = {

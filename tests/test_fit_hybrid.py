@@ -113,3 +113,78 @@ def test_bad_input(setup):
         fit.fit_hybrid(model, bad, steps=2, key=jax.random.key(0))
     with pytest.raises(hdjax.ConfigError, match="unknown method"):
         fit.fit_hybrid(model, inp, method="bfgs", key=jax.random.key(0))
+
+
+# ---- dynamic inputs: twist rate and Dahl memory states ---------------------------------
+
+
+@pytest.fixture(scope="session")
+def dynamic(setup):
+    rec, ls, _ = setup
+    scales = fit.dahl_scales(ls)
+    inp = fit.hybrid_inputs(rec, JOINT, compliance=ls, twist_rate=True, hysteresis=scales)
+    return scales, inp
+
+
+def test_dahl_scales_from_the_central_compliance(setup):
+    """Fractions of the rated torque times k1, the compliance of the segment [-tau0/3, tau0/3)
+    (the middle one of the five, Song et al. eq. (7)), read independently from the model."""
+    _, ls, _ = setup
+    k1 = float(np.asarray(ls.k)[2])
+    assert ls.segment_bounds[2] == (-400.0 / 3.0, 400.0 / 3.0)
+    np.testing.assert_allclose(
+        fit.dahl_scales(ls, (0.01, 0.1)), [0.01 * 400.0 * k1, 0.1 * 400.0 * k1], rtol=1e-15
+    )
+
+
+def test_dynamic_columns_match_independent_formulas(setup, dynamic):
+    """Twist rate: the least-squares slope over five equally spaced samples,
+    sum_j j x_{k+j} / (10 dt), in NumPy. Dahl states: the recursion of the docstring as a Python
+    loop. Both from the recorded angles only."""
+    rec, _, base = setup
+    scales, inp = dynamic
+    names = inp.layout.names
+    assert names[: len(base.layout.names)] == base.layout.names
+    assert names[len(base.layout.names) :] == ("twist_rate",) + tuple(
+        f"dahl(twist/{s:.4g})" for s in scales
+    )
+    x = np.asarray(inp.x)
+    t = np.asarray(rec.t)
+    tw = np.asarray(rec.theta_l) - np.asarray(rec.theta_m) / 160.0
+    dt = t[1] - t[0]
+    np.testing.assert_allclose(np.diff(t), dt, rtol=1e-9)  # the plant samples evenly
+    k = np.arange(2, tw.size - 2)
+    slope = sum(j * tw[k + j] for j in (-2, -1, 1, 2)) / (10.0 * dt)
+    rate = x[:, names.index("twist_rate")]
+    # Round-off: the twist is a difference of angles of ~1e2 rad (1e-14 rad), over 5e-4 s.
+    np.testing.assert_allclose(rate[k], slope, rtol=0, atol=1e-9 * np.abs(slope).max())
+    for s in scales:
+        z, ref = 0.0, []
+        for d in np.diff(tw, prepend=tw[:1]) / s:
+            z = min(1.0, max(-1.0, z + d * (1.0 - z * np.sign(d))))
+            ref.append(z)
+        np.testing.assert_allclose(x[:, names.index(f"dahl(twist/{s:.4g})")], ref, atol=1e-12)
+    # The states sweep the loop (the slow experiment reverses the twist several times).
+    z = x[:, names.index(f"dahl(twist/{scales[0]:.4g})")]
+    assert z.min() < -0.5 and z.max() > 0.5
+
+
+def test_inputs_must_match_the_model(setup, dynamic):
+    _, ls, plain = setup
+    _, inp = dynamic
+    model = fit.make_hybrid(inp, compliance=ls, hidden=(4,), key=jax.random.key(0))
+    with pytest.raises(hdjax.ModelMismatchError, match="twist_rate"):
+        fit.predict_hybrid(model, plain)
+    with pytest.raises(hdjax.ModelMismatchError, match="twist_rate"):
+        fit.fit_hybrid(model, plain, steps=2, key=jax.random.key(0))
+    no_sig = eqx.tree_at(lambda i: i.sig, inp, None, is_leaf=lambda v: v is None)
+    with pytest.raises(hdjax.ModelMismatchError, match="compliance signals"):
+        fit.predict_hybrid(model, no_sig)
+    assert np.all(np.isfinite(np.asarray(fit.predict_hybrid(model, inp))))
+
+
+@pytest.mark.parametrize("scales", [(0.0,), (-1e-4,), (float("nan"),), ("1e-4",), 1e-4])
+def test_bad_hysteresis_scales(setup, scales):
+    rec, ls, _ = setup
+    with pytest.raises(hdjax.ConfigError, match="hysteresis"):
+        fit.hybrid_inputs(rec, JOINT, compliance=ls, hysteresis=scales)

@@ -138,7 +138,11 @@ def test_elastic_torque_inverts_the_series_compliance():
     # 3 Newton steps from the piecewise guess: within 5e-6 of rated torque (2 mN·m), far
     # below the torque-sensor noise (0.8 N·m)
     np.testing.assert_allclose(np.asarray(back), np.asarray(torques), atol=2e-3)
-    p2 = plant.song_params()  # default wave-generator polynomial: chord steps
+    p2 = plant.song_params()  # default wave-generator polynomial: Newton steps
     d2 = plant.compliance_deflection(p2, torques, temp)
     back2 = plant._dynamics.elastic_torque(p2, d2, temp)
-    np.testing.assert_allclose(np.asarray(back2), np.asarray(torques), atol=4e-4)
+    np.testing.assert_allclose(np.asarray(back2), np.asarray(torques), atol=1e-6)
+    # up to twice rated torque (the driver's current limit): within 0.1 N·m
+    big = jnp.linspace(-800.0, 800.0, 81)
+    back3 = plant._dynamics.elastic_torque(p2, plant.compliance_deflection(p2, big, 25.0), 25.0)
+    np.testing.assert_allclose(np.asarray(back3), np.asarray(big), atol=0.1)

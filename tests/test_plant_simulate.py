@@ -69,6 +69,34 @@ def test_single_run_equals_batch_member_and_truth_only_on_request(scenarios):
     np.testing.assert_array_equal(np.asarray(rec.theta_m), np.asarray(batch.theta_m))
 
 
+_SPREAD_SCRIPT = """
+import sys
+import jax
+jax.config.update("jax_num_cpu_devices", 2)
+import numpy as np
+import hdjax
+from hdjax import plant
+assert len(jax.local_devices()) == 2
+recs = plant.simulate_scenarios(key=jax.random.key(0), duration=0.5)
+np.save(sys.argv[1], np.stack([np.asarray(recs[n].torque) for n in plant.SCENARIOS]))
+"""
+
+
+def test_batch_spread_over_two_cpu_devices_equals_one_device(tmp_path):
+    # simulate_scenarios splits the batch over the local devices (here 2 CPU devices, a fresh
+    # process: the device count is fixed when JAX starts); the result must not change
+    import subprocess
+    import sys
+
+    out = tmp_path / "spread.npy"
+    subprocess.run([sys.executable, "-c", _SPREAD_SCRIPT, str(out)], check=True, timeout=300)
+    recs = plant.simulate_scenarios(key=jax.random.key(0), duration=0.5)
+    want = np.stack([np.asarray(recs[n].torque) for n in plant.SCENARIOS])
+    np.testing.assert_allclose(np.load(out), want, rtol=1e-9, atol=1e-9)
+    with_one = plant.spread_batch({"x": jnp.zeros((3, 2))})  # one device here: unchanged
+    assert with_one["x"].shape == (3, 2)
+
+
 def test_static_and_sudden_loads(scenarios):
     # static: six rope positions of 2 s each, the last one at 0.95 rated torque; the output
     # friction is zero at rest, so the sensor holds the load

@@ -9,12 +9,18 @@ from ._compare import (
 from ._hybrid import (
     PLANT_FIELDS as PLANT_FIELDS,
     HybridFit as HybridFit,
-    HybridInputs as HybridInputs,
     HybridModel as HybridModel,
+    check_inputs as check_inputs,
     fit_hybrid as fit_hybrid,
-    hybrid_inputs as hybrid_inputs,
     make_hybrid as make_hybrid,
     predict_hybrid as predict_hybrid,
+)
+from ._inputs import (
+    DAHL_FRACTIONS as DAHL_FRACTIONS,
+    HybridInputs as HybridInputs,
+    dahl_scales as dahl_scales,
+    dynamic_columns as dynamic_columns,
+    hybrid_inputs as hybrid_inputs,
 )
 from ._linear import (
     METHODS as METHODS,
@@ -22,4 +28,8 @@ from ._linear import (
     LinearProblem as LinearProblem,
     fit_compliance_gradient as fit_compliance_gradient,
     linear_problem as linear_problem,
+)
+from ._periodic import (
+    format_periodic_table as format_periodic_table,
+    periodic_features_effect as periodic_features_effect,
 )

@@ -15,6 +15,10 @@ $$\hat T = T_c(x_c;\ \Delta\theta, I, \theta, \omega) + g_w\big(\mathrm{Input},\
   friction) are fitted as log-multipliers of the plant's values and fed to the network as one
   more input (variant (c)).
 
+The network may also read the dynamic inputs of [`hdjax.fit.hybrid_inputs`][] (the twist rate
+and Dahl memory states of the twist), which carry the structural damping and the hysteresis of
+the joint when it rings.
+
 All three sets of parameters sit in one pytree and are fitted by one loss, the mean squared torque
 error divided by the torque variance, with `optax` (Adam, minibatches, one `lax.scan`) or with
 `optimistix` Levenberg-Marquardt on the residual vector.
@@ -32,74 +36,12 @@ import optax
 import optimistix as optx
 
 from .._custom_types import PRNGKeyArray
-from .._errors import ConfigError, DataError, DivergenceError
-from .._features import smoothed_velocity
-from .._joint import Joint
-from .._recording import Recording
-from ..network import FeatureLayout, Network, build_features, standardise
+from .._errors import ConfigError, DataError, DivergenceError, ModelMismatchError
+from ..network import FeatureLayout, Network, standardise
+from ._inputs import HybridInputs
 
 PLANT_FIELDS = ("torque_constant", "inertia_m", "coulomb_m", "viscous_m")
 """Plant parameters fitted in variant (c), each as a log-multiplier of its preset value."""
-
-
-class HybridInputs(eqx.Module):
-    """Everything the hybrid model reads from a recording, computed once (all `(n,)` or `(n, f)`).
-
-    **Fields:** `sig` (compliance signals or `None`), `x` (network features), `current`,
-    `omega_m`, `alpha_m` (recorded motor velocity and acceleration), `torque` (reference or
-    `None`).
-    """
-
-    sig: eqx.Module | None
-    x: jax.Array
-    current: jax.Array
-    omega_m: jax.Array
-    alpha_m: jax.Array
-    torque: jax.Array | None
-    layout: FeatureLayout
-
-    @property
-    def n_samples(self) -> int:
-        return int(self.x.shape[0])
-
-    def take(self, idx) -> HybridInputs:
-        """Rows `idx` (inside jit)."""
-        return jax.tree.map(lambda a: a[idx], self)
-
-
-def hybrid_inputs(
-    recording: Recording,
-    joint: Joint,
-    *,
-    compliance=None,
-    periodic: bool = True,
-    kalman: bool = False,
-) -> HybridInputs:
-    """Precompute the inputs of a [`hdjax.fit.HybridModel`][] from a recording.
-
-    **Arguments:** `recording`; `joint`; `compliance` (the model whose signals are needed, or
-    `None`); `periodic`, `kalman`: network feature options (see
-    [`hdjax.network.build_features`][]).
-    """
-    sig = None
-    if compliance is not None:
-        from ..compliance import signals_from_recording
-
-        sig = signals_from_recording(
-            recording, compliance.ratio, compliance.twist_sign, velocity=compliance.velocity
-        )
-    feats = build_features(recording, joint, periodic=periodic, kalman=kalman)
-    omega = smoothed_velocity(recording.t, recording.theta_m, 5)
-    alpha = smoothed_velocity(recording.t, omega, 5)
-    return HybridInputs(
-        sig=sig,
-        x=feats.x,
-        current=jnp.asarray(recording.current, jnp.float64),
-        omega_m=omega,
-        alpha_m=alpha,
-        torque=recording.torque,
-        layout=feats.layout,
-    )
 
 
 class HybridModel(eqx.Module):
@@ -309,6 +251,7 @@ def fit_hybrid(
     **Raises:** [`hdjax.DivergenceError`][] naming the learning rate if the loss becomes
     non-finite.
     """
+    check_inputs(model, inputs)
     if inputs.torque is None:
         raise DataError("fit_hybrid needs inputs with a reference torque")
     if method not in ("adam", "levenberg_marquardt"):
@@ -364,7 +307,42 @@ def fit_hybrid(
     )
 
 
+def check_inputs(model: HybridModel, inputs: HybridInputs) -> None:
+    """Raise [`hdjax.ModelMismatchError`][] when `inputs` were built differently from the
+    inputs the model was made with (network columns, compliance signals)."""
+    if not isinstance(inputs, HybridInputs):
+        raise ModelMismatchError(
+            f"expected hdjax.fit.HybridInputs (from hdjax.fit.hybrid_inputs), got "
+            f"{type(inputs).__name__}"
+        )
+    if model.compliance is not None and inputs.sig is None:
+        raise ModelMismatchError(
+            "the model has a compliance part but the inputs carry no compliance signals; build "
+            "them with hybrid_inputs(..., compliance=model.compliance)"
+        )
+    if model.network is not None:
+        names = model.network.layout.names
+        if model.plant is not None:
+            names = names[:-1]  # the motor torque is computed by the model
+        if inputs.layout.names != names or inputs.layout.kalman != model.network.layout.kalman:
+            raise ModelMismatchError(
+                f"the inputs have network columns {list(inputs.layout.names)} but the model was "
+                f"made with {list(names)}; build them with the same hybrid_inputs options "
+                "(periodic, kalman, twist_rate, hysteresis)"
+            )
+
+
 @eqx.filter_jit
-def predict_hybrid(model: HybridModel, inputs: HybridInputs):
-    """Torque estimates [N·m] of a hybrid model for every row of `inputs` (jitted)."""
+def _predict(model: HybridModel, inputs: HybridInputs):
     return model(inputs)
+
+
+def predict_hybrid(model: HybridModel, inputs: HybridInputs):
+    """Torque estimates [N·m] of a hybrid model for every row of `inputs` (jitted).
+
+    The compliance part is inverted for torque as Song et al. eqs. (26)-(27), the network is
+    evaluated as eqs. (36)-(41). Refuses inputs built with other options than the model's (see
+    [`hdjax.fit.check_inputs`][]).
+    """
+    check_inputs(model, inputs)
+    return _predict(model, inputs)

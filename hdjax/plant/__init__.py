@@ -49,6 +49,7 @@ from ._simulate import (
     estimate_memory as estimate_memory,
     integrate as integrate,
     simulate as simulate,
+    spread_batch as spread_batch,
     stiffest_modes as stiffest_modes,
     to_recording as to_recording,
 )

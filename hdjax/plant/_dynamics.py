@@ -281,10 +281,9 @@ def elastic_torque(params: PlantParams, d_eff, temperature, *, inv=None):
 
     Closed form (eq. (27)) when the series compliance is piecewise linear (the flexspline, with the
     thermal factor and the linear wave-generator term folded into every segment). Otherwise
-    `params.newton_iterations` (static) corrections from that closed form: chord steps with the
-    slope at the start, refreshed once, when only the wave-generator polynomial is nonlinear (two
-    divisions per call, which keeps the simulation loop fast), Newton steps for backlash and the
-    smooth flexspline.
+    `params.newton_iterations` (static) Newton steps from that closed form (wave-generator
+    polynomial, backlash, smooth flexspline). With the Song preset's wave generator, three steps
+    leave at most 2e-8 N·m within rated torque and 0.05 N·m at twice rated torque.
     """
     inv = _inv(params, inv)
     scale, _ = _thermal(params, temperature)
@@ -293,18 +292,9 @@ def elastic_torque(params: PlantParams, d_eff, temperature, *, inv=None):
         extra = params.effects["wg_compliance"].coefficients[0] * inv["ratio"] * inv["ratio"]
     torque, _ = _inverse_and_stiffness(params, d_eff, scale, extra, inv)
     if _needs_newton(params):
-        chord = not (params.flexspline == "smooth" or params.has("backlash"))
-        if chord:
-            # one division: the slope at the closed-form start, reused by every step
-            stiffness = 1.0 / _compliance_slope(params, torque, temperature, inv)
-        for it in range(params.newton_iterations):
+        for _ in range(params.newton_iterations):
             residual = compliance_deflection(params, torque, temperature, inv=inv) - d_eff
-            if chord:
-                torque = torque - residual * stiffness
-                if it == 0:  # refresh the slope once, near the root
-                    stiffness = 1.0 / _compliance_slope(params, torque, temperature, inv)
-            else:
-                torque = torque - residual / _compliance_slope(params, torque, temperature, inv)
+            torque = torque - residual / _compliance_slope(params, torque, temperature, inv)
     return torque
 
 
@@ -382,6 +372,8 @@ def derivatives(
     """
     inv = _inv(params, inv)
     t_j = flexspline_torque(params, state, inv=inv)
+    if "one" in inv:
+        t_j = _materialise(t_j, inv["one"])  # computed once for both accelerations
     # mechanics: Hashimoto eqs. (15)-(16) with friction on both sides
     acc_m = (
         params.torque_constant * state.current
@@ -416,6 +408,21 @@ def _axpy(a, x: PlantState, y: PlantState) -> PlantState:
     return jax.tree.map(lambda xi, yi: yi + a * xi, x, y)
 
 
+def _materialise(tree, one):
+    r"""`tree` divided by a traced 1.0: numerically the identity, a fusion boundary for XLA.
+
+    XLA's CPU fusion copies cheap producers into every consumer. In an RK4 step each stage's
+    accelerations feed the next stage and the final update of every state, and the joint torque
+    feeds both accelerations, so without a boundary whole stages (the kinematic-error harmonics,
+    the compliance inversion) are recomputed many times: 12 500 scalar operations per step with
+    the Song preset instead of 1 900 (Hashimoto preset: 1 200 instead of 380), and about half the
+    speed. A division is "expensive" to XLA, so its result is computed once and stored. `one` must
+    be a traced 1.0 (`rk4_step` uses `1.0 + 0.0 * omega_m`, which XLA does not fold); the division
+    by exactly 1.0 is exact, so values and gradients are unchanged.
+    """
+    return jax.tree.map(lambda x: x / one, tree)
+
+
 def rk4_step(
     params: PlantParams, state: PlantState, motor_torque, load_torque, dt, *, inv=None
 ) -> PlantState:
@@ -442,7 +449,20 @@ def rk4_step(
     i_half = i_ref + (i0 - i_ref) * decay_half
     i_full = i_ref + (i0 - i_ref) * decay_half * decay_half
     with_i = lambda st, i: eqx.tree_at(lambda x: x.current, st, i)
-    f = lambda st: derivatives(params, st, motor_torque, load_torque, inv=inv)
+    one = 1.0 + 0.0 * state.omega_m  # a 1.0 XLA cannot fold (see `_materialise`)
+    inv = {**inv, "one": one}
+    # store each stage's accelerations and state rates once (see `_materialise`); the angle
+    # rates are the stage speeds and the current is integrated exactly, both cheap to recompute
+    rates = lambda k: (
+        (k.omega_m, k.omega_l)
+        + ((k.z,) if params.has("hysteresis") else ())
+        + ((k.temperature,) if params.has("temperature") else ())
+    )
+
+    def f(st):
+        k = derivatives(params, st, motor_torque, load_torque, inv=inv)
+        return eqx.tree_at(rates, k, _materialise(rates(k), one))
+
     k1 = f(state)
     k2 = f(with_i(_axpy(0.5 * dt, k1, state), i_half))
     k3 = f(with_i(_axpy(0.5 * dt, k2, state), i_half))

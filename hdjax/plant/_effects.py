@@ -28,6 +28,7 @@ import numpy as np
 from .._custom_types import Array, Float
 from .._errors import ConfigError
 from .._io import did_you_mean
+from . import _trig
 
 _f64 = lambda x: jnp.asarray(x, jnp.float64)
 
@@ -85,7 +86,7 @@ class Harmonics(eqx.Module):
     def __call__(self, angle, inv=None):
         # a Python sum over the (static) number of harmonics keeps XLA from a reduction
         terms = [
-            self.amplitudes[j] * jnp.sin(self.orders[j] * angle + self.phases[j])
+            self.amplitudes[j] * _trig.sin(self.orders[j] * angle + self.phases[j])
             for j in range(self.orders.shape[0])
         ]
         return sum(terms[1:], terms[0]) if terms else jnp.zeros_like(angle)

@@ -38,6 +38,7 @@ from ._simulate import (
     check_memory,
     check_step,
     simulate,
+    spread_batch,
     to_recording,
 )
 
@@ -225,7 +226,8 @@ def simulate_scenarios(
         d = scenario_drive(name, params, duration=duration, dt=dt, key=jax.random.fold_in(k, 0))
         drives.append(jax.tree.map(lambda x: x[: n_out * stride], d))
     stack = lambda xs: jax.tree.map(lambda *a: jnp.stack(a), *xs)
-    _, outs = _integrate_batch(params, default_gains(params), None, stack(drives), dt, stride, 1)
+    drives_b = spread_batch(stack(drives))  # over the local devices, when there are several
+    _, outs = _integrate_batch(params, default_gains(params), None, drives_b, dt, stride, 1)
     t = np.arange(n_out) * output_period
     sensors = SensorConfig() if sensors is None else sensors
     result = {}

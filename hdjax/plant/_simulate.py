@@ -18,6 +18,7 @@ import numpy as np
 from .._custom_types import Array, Float
 from .._errors import ConfigError, DivergenceError
 from .._recording import Recording, make_recording
+from . import _trig
 from ._controller import ControllerGains, default_gains
 from ._dynamics import (
     PlantState,
@@ -79,7 +80,7 @@ class Outputs(eqx.Module):
 def load_torque(drive_k, theta_l):
     """External torque on the link at one step: gravity of the weights plus a push [N·m]."""
     gravity, external = drive_k
-    return gravity * jnp.cos(theta_l) + external
+    return gravity * _trig.cos(theta_l) + external
 
 
 def _measure(params: PlantParams, state: PlantState, load, inv) -> Outputs:
@@ -196,6 +197,26 @@ def _initial(params, drive, gains):
 
 
 _initial_jit = eqx.filter_jit(_initial)
+
+
+def spread_batch(tree):
+    r"""Place a batch (leading axis of every array leaf) across the local devices, evenly.
+
+    A `vmap`-ed simulation is one XLA loop; on a CPU that loop runs on one core. When JAX has
+    several devices (on CPU: `jax.config.update("jax_num_cpu_devices", n)` before JAX is first
+    used, e.g. `n = os.cpu_count()`), splitting the batch over them runs the parts in parallel
+    (XLA partitions the `vmap` along the batch axis). With one device, or a batch that does not
+    divide evenly, `tree` is returned as it is.
+    """
+    devices = jax.local_devices()
+    leaves = [x for x in jax.tree.leaves(tree) if hasattr(x, "shape") and x.ndim]
+    if len(devices) < 2 or not leaves or leaves[0].shape[0] % len(devices):
+        return tree
+    if any(x.shape[0] != leaves[0].shape[0] for x in leaves):
+        return tree
+    mesh = jax.sharding.Mesh(np.asarray(devices), ("batch",))
+    spec = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
+    return jax.tree.map(lambda x: jax.device_put(x, spec) if getattr(x, "ndim", 0) else x, tree)
 
 
 @eqx.filter_jit
