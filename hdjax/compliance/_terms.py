@@ -28,6 +28,7 @@ import math
 import jax
 import jax.numpy as jnp
 
+from .._trig import sincos
 from ._signals import Signals
 
 TORQUE_KINDS = ("none", "linear", "memoryless", "path")
@@ -41,50 +42,6 @@ estimator will compute it, causally and without the reference sensor."""
 def _fmt(order: float) -> str:
     """An order as a short decimal string (`2`, `1.98`, `0.5`)."""
     return f"{order:.10g}"
-
-
-# fdlibm's split of pi/2 (33 + 33 + 53 bits) and its sin/cos kernels on [-pi/4, pi/4].
-_PIO2 = (1.57079632673412561417e00, 6.07710050630396597660e-11, 2.02226624879595063154e-21)
-_SIN = (
-    -1.66666666666666324348e-01,
-    8.33333333332248946124e-03,
-    -1.98412698298579493134e-04,
-    2.75573137070700676789e-06,
-    -2.50507602534068634195e-08,
-    1.58969099521155010221e-10,
-)
-_COS = (
-    4.16666666666666019037e-02,
-    -1.38888888888741095749e-03,
-    2.48015872894767294178e-05,
-    -2.75573143513906633035e-07,
-    2.08757232129817482790e-09,
-    -1.13596475577881948265e-11,
-)
-
-
-def sincos(x):
-    r"""$(\sin x, \cos x)$ from elementwise arithmetic only (float64, |x| < 1e6).
-
-    Cody-Waite reduction by $\pi/2$ and fdlibm's minimax kernels (error ~1e-16 relative to
-    |x|). Unlike `jnp.sin`/`jnp.cos` it fuses into the surrounding XLA loop and shares the
-    reduction between the two, which makes the paper-form Fourier terms several times cheaper.
-    """
-    k = jnp.round(x * (2.0 / math.pi))
-    r = ((x - k * _PIO2[0]) - k * _PIO2[1]) - k * _PIO2[2]
-    z = r * r
-    ps = _SIN[5]
-    for c in _SIN[4::-1]:
-        ps = c + z * ps
-    pc = _COS[5]
-    for c in _COS[4::-1]:
-        pc = c + z * pc
-    s = r + r * z * ps
-    co = 1.0 - 0.5 * z + z * z * pc
-    q = k - 4.0 * jnp.floor(k * 0.25)  # quadrant 0..3
-    sin = jnp.where(q == 0.0, s, jnp.where(q == 1.0, co, jnp.where(q == 2.0, -s, -co)))
-    cos = jnp.where(q == 0.0, co, jnp.where(q == 1.0, -s, jnp.where(q == 2.0, -co, s)))
-    return sin, cos
 
 
 def harmonic_pairs(u, order: int):

@@ -276,18 +276,12 @@ def compare_methods(
 
 def format_table(result: dict) -> str:
     """The comparison as a Markdown table."""
-    lines = [
-        "| method | scenario | RMS [N·m] | max [N·m] | RMS % | max % | fit [s] "
-        "| estimate [us/sample] |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for r in result["rows"]:
-        lines.append(
-            f"| {r['method']} | {r['scenario']} | {r['rms']:.3g} | {r['max']:.3g} | "
-            f"{r['rms_pct']:.3g} | {r['max_pct']:.3g} | {r['fit_time_s']:.3g} | "
-            f"{r['estimate_us_per_sample']:.3g} |"
-        )
-    return "\n".join(lines)
+    from ..report import markdown_table
+
+    header = ["method", "scenario", "RMS [N·m]", "max [N·m]", "RMS %", "max %", "fit [s]"]
+    keys = ("rms", "max", "rms_pct", "max_pct", "fit_time_s", "estimate_us_per_sample")
+    rows = [[r["method"], r["scenario"], *(f"{r[k]:.3g}" for k in keys)] for r in result["rows"]]
+    return markdown_table(header + ["estimate [us/sample]"], rows)
 
 
 def plot_comparison(result: dict, path) -> None:

@@ -189,15 +189,14 @@ def summarise(rows: list[dict]) -> list[dict]:
 
 def format_periodic_table(result: dict) -> str:
     """The summary of [`hdjax.fit.periodic_features_effect`][] as a Markdown table."""
-    lines = [
-        "| model | kinematic error | scenario | RMS % plain | RMS % periodic | max % plain "
-        "| max % periodic | RMS plain / periodic |",
-        "|---|---|---|---|---|---|---|---|",
+    from ..report import markdown_table
+
+    header = ["model", "kinematic error", "scenario", "RMS % plain", "RMS % periodic"]
+    header += ["max % plain", "max % periodic", "RMS plain / periodic"]
+    rows = [
+        [r["model"], "on" if r["kinematic_error"] else "off", r["scenario"]]
+        + [f"{r['rms_pct_plain']:.3f}", f"{r['rms_pct_periodic']:.3f}"]
+        + [f"{r['max_pct_plain']:.2f}", f"{r['max_pct_periodic']:.2f}", f"{r['rms_ratio']:.2f}"]
+        for r in result["summary"]
     ]
-    for r in result["summary"]:
-        lines.append(
-            f"| {r['model']} | {'on' if r['kinematic_error'] else 'off'} | {r['scenario']} | "
-            f"{r['rms_pct_plain']:.3f} | {r['rms_pct_periodic']:.3f} | {r['max_pct_plain']:.2f} "
-            f"| {r['max_pct_periodic']:.2f} | {r['rms_ratio']:.2f} |"
-        )
-    return "\n".join(lines)
+    return markdown_table(header, rows)

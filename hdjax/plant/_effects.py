@@ -25,10 +25,10 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _trig
 from .._custom_types import Array, Float
 from .._errors import ConfigError
 from .._io import did_you_mean
-from . import _trig
 
 _f64 = lambda x: jnp.asarray(x, jnp.float64)
 

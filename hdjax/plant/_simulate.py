@@ -15,10 +15,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _trig
 from .._custom_types import Array, Float
 from .._errors import ConfigError, DivergenceError
 from .._recording import Recording, make_recording
-from . import _trig
 from ._controller import ControllerGains, default_gains
 from ._dynamics import (
     PlantState,

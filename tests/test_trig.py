@@ -1,4 +1,4 @@
-"""The vectorisable sine and cosine of the plant (`hdjax.plant._trig`) against NumPy's libm."""
+"""The vectorisable sine and cosine (`hdjax._trig`) against NumPy's libm."""
 
 import jax
 import jax.numpy as jnp
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import hdjax  # noqa: F401  (float64)
-from hdjax.plant import _trig
+from hdjax import _trig
 
 
 @pytest.mark.parametrize("scale", [1.0, 1e3, 1e6, 1e9])

@@ -2,10 +2,11 @@ r"""Sine and cosine that XLA vectorises: Cody-Waite reduction and fdlibm's kerne
 
 On CPU, XLA lowers a float64 `jnp.sin` over an array to one libm call per element (about 10 ns
 each, measured on the 2-core benchmark machine), while `tanh` and polynomials are vectorised
-(1-2 ns). The plant evaluates the kinematic-error harmonics (Song et al. eq. (9)) of the motor and
-link angles at every RK4 stage, so under `vmap` those calls were the largest single cost of a step.
+(1-2 ns) and fuse into the surrounding loop. The plant evaluates the kinematic-error harmonics
+(Song et al. eq. (9)) of the motor and link angles at every RK4 stage, and the compliance model's
+kinematic terms (eq. (9)) need sines of every sample's angle, so both use these.
 
-[`sin`][] and [`cos`][] compute the same functions from elementwise operations only:
+[`sincos`][], [`sin`][] and [`cos`][] compute the same functions from elementwise operations only:
 
 1. $n = \operatorname{round}(2x/\pi)$ and $r = x - n\pi/2$, with $\pi/2$ split into three 23-bit
    parts and a remainder so that every product $n c_j$ is exact for $|n| < 2^{30}$ (Cody and
@@ -72,7 +73,13 @@ def _kernels(r):
     return s, c
 
 
-def _sincos(x):
+def sincos(x):
+    r"""$(\sin x, \cos x)$ from elementwise operations only, sharing one reduction (see the module).
+
+    Within about 2 ulp of libm for $|x| < 10^9$. Not differentiable through `custom_jvp` (use
+    [`sin`][] and [`cos`][] under `jax.grad`; plain autodiff of this function is correct too, up
+    to the polynomial's derivative error of about 1e-15).
+    """
     n, r = _reduce(x)
     s, c = _kernels(r)
     q = n - 4.0 * jnp.floor(n * 0.25)  # n mod 4, exact in float64
@@ -88,24 +95,24 @@ def sin(x):
     Within about 2 ulp of libm for $|x| < 10^9$. Used for the kinematic-error harmonics of Song
     et al. eq. (9).
     """
-    return _sincos(x)[0]
+    return sincos(x)[0]
 
 
 @jax.custom_jvp
 def cos(x):
     r"""$\cos x$ from elementwise operations only (vectorised by XLA on CPU); see the module."""
-    return _sincos(x)[1]
+    return sincos(x)[1]
 
 
 @sin.defjvp
 def _sin_jvp(primals, tangents):
     (x,), (t,) = primals, tangents
-    s, c = _sincos(x)
+    s, c = sincos(x)
     return s, c * t
 
 
 @cos.defjvp
 def _cos_jvp(primals, tangents):
     (x,), (t,) = primals, tangents
-    s, c = _sincos(x)
+    s, c = sincos(x)
     return c, -s * t
