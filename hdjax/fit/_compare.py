@@ -131,8 +131,8 @@ def compare_methods(
     # The hybrid and joint fits' compliance part. The current polynomial (eq. (8)) stands in
     # for the wave generator's torque, which equals K_t I only at rest: when the joint rings
     # (the rope cut of `sudden`) the current lags the twist torque and the polynomial, fitted on
-    # quasi-static data where it is collinear with the flexspline terms, misses by up to 69 % of
-    # the rated torque in the 15 ms after the cut (the lstsq row of `sudden`, 60 s). Without it
+    # quasi-static data where it is collinear with the flexspline terms, misses by up to 60 % of
+    # the rated torque in the milliseconds after the cut (the lstsq row of `sudden`). Without it
     # the compliance part reads the twist alone, and the network (which sees the current)
     # keeps what the current adds.
     hybrid_structure = (
