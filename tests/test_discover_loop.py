@@ -13,13 +13,7 @@ import numpy as np
 import pytest
 
 from hdjax.compliance import ColumnTimesTorque, Coulomb, Hysteresis
-from hdjax.discover import DiscoverOptions, cli_main, discover
-from hdjax.discover._loop import (
-    _calibrate_monotone,
-    _test_errors,
-    calibrate_baseline,
-    training_data,
-)
+from hdjax.discover import DiscoverOptions, cli_main, discover, refit_structure
 
 from .conftest import REPO
 from .discover_data import JOINT, synthetic_recording
@@ -34,11 +28,7 @@ CASES = {
 
 
 def _true_rms(train, test, term):
-    notes = []
-    base = calibrate_baseline(train, JOINT, DiscoverOptions(), notes)
-    data = training_data(base, train) if term.torque_kind == "path" else train
-    model = _calibrate_monotone(base.with_effects(term), data, notes).model
-    return _test_errors(model, test, JOINT.rated_torque)[0].rms
+    return refit_structure(train, test, JOINT, [term]).rms
 
 
 @pytest.mark.parametrize("name", list(CASES))
@@ -81,7 +71,11 @@ def test_lara8_config_runs_on_real_data(lara8_dir, tmp_path):
     )
     assert rc == 0
     rep = json.loads((out / "report.json").read_text())
-    # whatever the data says, the report must be self-consistent and never worse at the end
-    assert rep["final"]["rms"] <= rep["baseline"]["rms"]
-    assert all(s["cv_gain"] >= 0.05 for s in rep["steps"])
+    # whatever the data says, the report must be self-consistent: every step lowers the
+    # cross-validated torque error, and a final TEST error above the start is said loudly
+    cv = [rep["baseline"]["cv_torque_rms"]] + [s["cv_torque_rms"] for s in rep["steps"]]
+    assert all(b < a for a, b in zip(cv, cv[1:])), cv
+    assert all(s["cv_gain"] >= 0.05 and s["stability"] >= 0.7 for s in rep["steps"])
+    if rep["final"]["rms"] > rep["baseline"]["rms"]:
+        assert any(n.startswith("warning: on TEST") for n in rep["notes"])
     assert any("split" in n for n in rep["notes"])

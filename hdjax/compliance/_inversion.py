@@ -25,7 +25,7 @@ most the jump of $h$ between neighbouring segments divided by the smaller compli
 
 Effects that depend nonlinearly on the present torque (stiffening, backlash) are then solved
 by safeguarded Newton steps, and effects on the torque path (hysteresis) are driven by the
-torque estimated without them, causally, in one pass.
+torque being estimated, causally, by an implicit step per sample (`_path_states`).
 """
 
 from __future__ import annotations
@@ -44,6 +44,7 @@ from .._recording import Recording
 from ._lstsq import check_invertible
 from ._model import ComplianceModel
 from ._signals import Signals, signals_from_recording
+from ._terms import SEGMENT_START
 
 EDGE_TOLERANCE = 1e-9
 """A candidate counts as inside its segment up to this fraction of the rated torque."""
@@ -185,13 +186,18 @@ def _estimate_impl(model: ComplianceModel, sig: Signals):
 
     t, seg, amb, unres = solve(r)
     if effects["path"]:
-        # Path-dependent terms (hysteresis) are driven by the torque estimated without them,
-        # causally, in one pass: the same driver the calibration uses (the previous model's
-        # estimate). Iterating to a fixed point instead is unstable once the loop gain
-        # c * dz/dT of a sharp hysteresis exceeds the compliance.
+        # Path-dependent terms (hysteresis) are driven by the torque being estimated, causally:
+        # each sample's state and torque are solved together (implicitly, see `_path_states`),
+        # then the whole record is inverted once more with the states removed.
+        slope = model.k[seg] + (0.0 if g is None else g)
+        for term, c in effects["memoryless"]:
+            slope = slope + c[0] * term.value_and_slope(t)[1]
+        # a segment the calibration left out has no compliance: use the largest one there
+        slope = jnp.where(slope > 0, slope, jnp.max(model.k))
+        z = _path_states(t, slope, sig.extras.get(SEGMENT_START), effects["path"])
         r_eff = r
-        for term, c in effects["path"]:
-            r_eff = r_eff - term.columns(sig, t) @ c
+        for (_, c), zi in zip(effects["path"], z):
+            r_eff = r_eff - zi * c[0]
         t, seg, amb, unres = solve(r_eff)
     lo, hi = model.torque_range
     return TorqueEstimate(
@@ -200,6 +206,51 @@ def _estimate_impl(model: ComplianceModel, sig: Signals):
 
 
 _estimate = eqx.filter_jit(_estimate_impl)
+
+MIN_PATH_SLOPE = 0.05
+"""Floor of the total slope $1 + \\sum_i (c_i/k)\\,\\partial z_i/\\partial T$ of a sample's
+implicit equation (a hysteresis whose twist slope right after a reversal cancels the compliance
+has no inverse there; the floor keeps the step bounded instead)."""
+
+
+def _path_states(t0, slope, reset, terms):
+    r"""Causal Dahl states of the torque being estimated, solved implicitly sample by sample.
+
+    With the torque-free and memoryless parts inverted to $T^0_k$ and the local compliance
+    $k_k = \partial\Delta\theta/\partial T$, sample $k$ solves
+    $T_k + \sum_i a_i z_i(T_k) = T^0_k$, $a_i = c_i / k_k$, with the Dahl step
+    $z_i(T) = z_{i,k-1} + \frac{T - T_{k-1}}{T_{h,i}}(1 - z_{i,k-1}\,s)$ on the side
+    $s = \mathrm{sgn}(T_k - T_{k-1})$ - the same state the calibration computes from the
+    estimate ([`hdjax.compliance.dahl_state`][]). The left side is piecewise linear and
+    increasing in $T$ while the hysteresis slope stays below the compliance, so the side is
+    found from its value at $T_{k-1}$ and the step is exact: an implicit (backward) step, stable
+    for any loop gain, where an explicit one oscillates once $|a_i| / T_{h,i}$ exceeds 1.
+    States restart at 0 where `reset` is set (a gap). **Returns:** one state array per term.
+    """
+    scales = [term.torque_scale for term, _ in terms]
+    coefs = [c[0] for _, c in terms]
+    reset = jnp.zeros(t0.shape, bool) if reset is None else jnp.asarray(reset).astype(bool)
+
+    def _step(carry, x):
+        zs, tp = carry
+        t0k, kk, rs = x
+        # a new segment starts with no memory and no step across the gap
+        zs = tuple(jnp.where(rs, 0.0, z) for z in zs)
+        tp = jnp.where(rs, t0k, tp)
+        a = [c / kk for c in coefs]
+        at_prev = tp + sum(ai * z for ai, z in zip(a, zs))
+        s = jnp.where(t0k >= at_prev, 1.0, -1.0)
+        gain = 1.0 + sum(ai * (1.0 - z * s) / th for ai, z, th in zip(a, zs, scales))
+        tk = tp + (t0k - at_prev) / jnp.maximum(gain, MIN_PATH_SLOPE)
+        zs = tuple(
+            jnp.clip(z + (tk - tp) / th * (1.0 - z * s), -1.0, 1.0) for z, th in zip(zs, scales)
+        )
+        return (zs, tk), jnp.stack(zs)
+
+    zero = jnp.zeros((), t0.dtype)
+    init = (tuple(zero for _ in terms), t0[0])
+    _, z = jax.lax.scan(_step, init, (t0, slope, reset))
+    return [z[:, i] for i in range(len(terms))]
 
 
 def _newton(model, t, seg, r, hs, g, terms):

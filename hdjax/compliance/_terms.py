@@ -38,6 +38,10 @@ TORQUE_PATH = "_torque_path"
 [`Hysteresis`][]): the torque *estimated* by a previous model, so the state is computed as the
 estimator will compute it, causally and without the reference sensor."""
 
+SEGMENT_START = "_segment_start"
+"""Name of an optional signal, 1 at the first sample of each contiguous segment of a recording
+with gaps: memory states (hysteresis) restart there, as [`dahl_state`][]'s `reset`."""
+
 
 def _fmt(order: float) -> str:
     """An order as a short decimal string (`2`, `1.98`, `0.5`)."""
@@ -311,29 +315,35 @@ class Backlash:
         return v, (1.0 - v**2) / self.width
 
 
-def dahl_state(torque, torque_scale: float):
+def dahl_state(torque, torque_scale: float, reset=None):
     """Causal Dahl-type hysteresis state driven by a torque path.
 
     $z_k = z_{k-1} + \\frac{\\Delta T_k}{T_h} (1 - z_{k-1}\\,\\mathrm{sgn}\\,\\Delta T_k)$,
     clipped to $[-1, 1]$: the rate-independent Dahl model ($\\sigma = 1$) with the torque as its
     input, so
     $z$ saturates at $\\pm 1$ after a torque reversal of a few $T_h$ (the loop of Song et al.
-    Fig. 2, B to B'). Starts at $z_0 = 0$.
+    Fig. 2, B to B'). Starts at $z_0 = 0$, and restarts at 0 wherever `reset` (optional, 1 at
+    the first sample of a segment after a gap) is set.
     """
 
     dT = jnp.diff(torque, prepend=torque[:1]) / torque_scale
-    return _dahl_scan(dT)
+    if reset is None:
+        reset = jnp.zeros(dT.shape, bool)
+    return _dahl_scan(dT, jnp.asarray(reset).astype(bool))
 
 
 @jax.jit
-def _dahl_scan(du):
+def _dahl_scan(du, reset):
     # du = dT / T_h, so one compiled scan serves every torque scale.
-    def _step(z, d):
+    def _step(z, x):
+        d, rs = x
+        # a segment after a gap starts afresh: no state, no step across the gap
+        z, d = jnp.where(rs, 0.0, z), jnp.where(rs, 0.0, d)
         # Dahl: dz = dT/Th * (1 - z sign(dT)); explicit step, clipped for large steps.
         z = jnp.clip(z + d * (1.0 - z * jnp.sign(d)), -1.0, 1.0)
         return z, z
 
-    return jax.lax.scan(_step, jnp.zeros((), du.dtype), du)[1]
+    return jax.lax.scan(_step, jnp.zeros((), du.dtype), (du, reset))[1]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -357,7 +367,7 @@ class Hysteresis:
         # A torque path supplied with the signals (the estimate of a previous model, so that
         # calibration sees the state the estimator will see) takes precedence.
         driver = sig.extras.get(TORQUE_PATH, torque)
-        return dahl_state(driver, self.torque_scale)[:, None]
+        return dahl_state(driver, self.torque_scale, sig.extras.get(SEGMENT_START))[:, None]
 
 
 TERM_TYPES = (

@@ -42,6 +42,7 @@ from ..compliance import (
     Viscous,
 )
 from ..compliance._terms import _fmt
+from ._hysteresis import TwistHysteresis
 from ._spectrum import OrderSpectrum, order_power, order_spectrum, refine_peak, spectrum_peaks
 
 FAMILIES = (
@@ -190,6 +191,7 @@ def build_library(
     options: LibraryOptions = LibraryOptions(),
     extra_columns: tuple[str, ...] = (),
     twist_sign: float = 1.0,
+    compliance: float | None = None,
 ) -> tuple[list[Candidate], dict[str, OrderSpectrum]]:
     """All candidate effects for the present residual, and the order spectra used.
 
@@ -237,7 +239,13 @@ def build_library(
             cands.append(Candidate(term.key, term.key, term))
     if "hysteresis:torque" in fams and "hysteresis:torque" not in existing_keys:
         for frac in options.dahl_fractions:
-            term = Hysteresis(torque_scale=frac * rated_torque)
+            # with the model's compliance, the state follows the measured deformation
+            # (hdjax/discover/_hysteresis.py); without it, the torque path
+            term = (
+                Hysteresis(torque_scale=frac * rated_torque)
+                if compliance is None
+                else TwistHysteresis(torque_scale=frac * rated_torque, compliance=compliance)
+            )
             cands.append(Candidate(term.key, term.key, term))
     if "backlash:torque" in fams and "backlash:torque" not in existing_keys:
         for frac in options.backlash_fractions:

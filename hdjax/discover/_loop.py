@@ -1,47 +1,72 @@
 """The residual loop: find what the model gets wrong, name the effect, add it, refit, repeat.
 
 1. Calibrate the starting model (the paper's, Song et al. Section II) by least squares on the
-   training recording.
-2. Compute its twist residual on the training data and the order spectra of that residual
-   against both angles; build the candidate library ([`hdjax.discover.build_library`][]).
-3. Select with sparse regression (pysindy STLSQ on the library made orthogonal to the model)
-   and rank the selected candidates by their cross-validated explained variance of the
-   residual, *within the training data only*.
-4. **Stopping rule.** Add the best-ranked selected candidate that removes at least `min_gain`
-   (default 5 %) of the model's cross-validated twist error overall *and* at least half of that
-   in every fold (a candidate that helps on average but not everywhere is fitting a
-   coincidence of part of the record, such as an angle harmonic standing in for a function of
-   torque on a trajectory where the load follows the angle). Stop when no candidate qualifies,
-   or after `max_effects` effects.
-5. Refit by least squares with the new columns, re-estimate torque on the test recording by
-   inversion (eqs. (26)-(27)) and record the errors. The test recording is never used to choose.
+   training recording. A recording with gaps (time steps over 3 sample periods, or the joins
+   of a block split) is a list of segments: derivatives never cross a gap and memory states
+   restart at one ([`hdjax.discover.pipeline_signals`][]).
+2. Cut TRAIN into whole contiguous blocks, no shorter than the residual's correlation length
+   and never across a gap; deal them to `n_folds` folds (interleaved), and again in
+   `n_resamples` random balanced deals for stability selection.
+3. Compute the twist residual on TRAIN and its order spectra against both angles; build the
+   candidate library ([`hdjax.discover.build_library`][]) and score every candidate by the
+   share of the cross-validated twist error it removes (exactly, by Frisch-Waugh-Lovell
+   updates of per-fold QR factors), on the standard folds and on every resampled deal.
+4. **Screening.** A candidate is eligible when pysindy's STLSQ selects it, it removes at least
+   `min_gain` (default 5 %) of the cross-validated twist error, and it does so in at least
+   `min_stability` (70 %) of the resampled fold assignments (stability selection).
+5. **Acceptance in the torque domain.** For the `n_shortlist` best eligible candidates, the
+   whole pipeline runs per fold: calibration on the fold's training part, then inversion
+   (eqs. (26)-(27)), with memory states computed causally from the estimate exactly as on
+   TEST. The candidate with the lowest cross-validated torque error is added only if it lowers
+   that error by at least `min_torque_gain`; an accepted step never raises it. Stop when none
+   does, or after `max_effects` effects.
+6. Refit on all of TRAIN, estimate torque on TEST and record the errors. TEST is never used
+   to choose. At the end every added effect's amplitude gets a 95 % moving-block bootstrap
+   interval over TRAIN ([`hdjax.discover._uncertainty`][]), and structure the final model
+   leaves above the noise is listed as `unexplained`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import time
-import warnings
 from collections.abc import Callable
 
-import equinox as eqx
 import numpy as np
 
 from .._errors import CalibrationError, DataError, HdjaxError, InversionError
 from .._joint import Joint
 from .._metrics import ErrorMetrics, error_metrics
 from .._recording import Recording
-from ..compliance import (
-    ComplianceModel,
-    calibrate_lstsq,
-    estimate_torque,
-    merge_sparse_segments,
+from ..compliance import ComplianceModel, merge_sparse_segments
+from ..compliance._lstsq import prepare
+from ._folds import (
+    contiguous_blocks,
+    correlation_length,
+    cv_block_length,
+    fold_assignment,
 )
-from ..compliance._lstsq import _design, prepare
-from ..compliance._terms import TORQUE_PATH
 from ._library import LibraryOptions, build_library, candidate_columns
-from ._select import cv_gains, fold_basis, sindy_select
+from ._pipeline import (
+    PipelineData,
+    calibrate,
+    cross_validate,
+    design,
+    estimate,
+    has_path,
+    pipeline_signals,
+    quiet_calibrate,
+)
+from ._select import (
+    block_grams,
+    cv_gains,
+    cv_gains_by_blocks,
+    fold_basis,
+    sindy_select,
+)
 from ._spectrum import OrderSpectrum, order_spectrum
+from ._uncertainty import effect_intervals
+from ._unexplained import unexplained_structure
 
 ARCSEC = 180.0 * 3600.0 / np.pi
 
@@ -52,6 +77,12 @@ class DiscoverOptions:
 
     max_effects: int = 5
     min_gain: float = 0.05
+    min_torque_gain: float = 0.02
+    min_stability: float = 0.7
+    n_resamples: int = 20
+    n_shortlist: int = 3
+    n_grid_tries: int = 3
+    seed: int = 0
     n_folds: int = 5
     block: int = 200
     sindy_threshold: float = 0.02
@@ -78,6 +109,10 @@ class StepResult:
     spectra: dict[str, OrderSpectrum]
     model: ComplianceModel
     torque_estimate: np.ndarray
+    stability: float = 1.0
+    cv_torque_rms: float = float("nan")
+    cv_twist_rms_arcsec: float = float("nan")
+    amplitude: dict | None = None
 
 
 @dataclasses.dataclass
@@ -97,19 +132,17 @@ class DiscoveryResult:
     test: Recording
     train_residual_final: np.ndarray
     seconds: float
+    baseline_cv_torque_rms: float = float("nan")
+    baseline_cv_twist_rms_arcsec: float = float("nan")
+    unexplained: list = dataclasses.field(default_factory=list)
+    cv_block_samples: int = 0
 
     @property
     def effects(self) -> list[str]:
         return [s.key for s in self.steps]
 
 
-def _quiet_calibrate(model, data, notes, throw=True):
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        res = calibrate_lstsq(model, data, throw=throw)
-    for w in caught:
-        notes.append(str(w.message))
-    return res
+_quiet_calibrate = quiet_calibrate
 
 
 def _merge_knot(model: ComplianceModel, j: int) -> ComplianceModel:
@@ -179,7 +212,7 @@ def calibrate_baseline(train: Recording, joint: Joint, options: DiscoverOptions,
         model, merged = merge_sparse_segments(model, np.asarray(train.torque))
         trial_notes = list(merged)
         try:
-            res = _calibrate_monotone(model, train, trial_notes)
+            res = _calibrate_monotone(model, _as_data(model, train).pair(), trial_notes)
         except (CalibrationError, InversionError) as err:
             last = err
             notes.append(f"starting model {kw} not calibrated: {err}")
@@ -191,15 +224,25 @@ def calibrate_baseline(train: Recording, joint: Joint, options: DiscoverOptions,
     raise CalibrationError(f"no starting model could be calibrated on the training data: {last}")
 
 
+def _as_data(model, data) -> PipelineData:
+    if isinstance(data, PipelineData):
+        return data
+    return pipeline_signals(data, model.ratio, model.twist_sign, model.velocity)
+
+
 def _test_errors(model, test, rated):
-    est = estimate_torque(model, test)
-    torque = np.asarray(est.torque)
-    return error_metrics(torque, test.torque, rated), torque
+    """TEST torque errors of `model` (the pipeline's signals: gaps honoured)."""
+    data = _as_data(model, test)
+    torque = estimate(model, data)
+    return error_metrics(torque, data.torque, rated), torque
 
 
-def _twist_rms(model, data) -> float:
-    sig, torque = training_data(model, data)  # path terms driven as at calibration
-    r = np.asarray(sig.twist) - np.asarray(model.predict_twist(sig, torque))
+def _twist_rms(model, data, driver=None) -> float:
+    data = _as_data(model, data)
+    if driver is None and has_path(model):
+        driver = estimate(model, data)
+    sig, torque = data.pair(driver)
+    r = np.asarray(sig.twist) - design(model, sig, torque) @ np.asarray(model.coef)
     return float(np.sqrt(np.mean(r**2)) * ARCSEC)
 
 
@@ -207,21 +250,34 @@ def _usable_columns(train: Recording) -> tuple[str, ...]:
     return tuple(name for name, x in train.extras.items() if float(np.ptp(np.asarray(x))) > 0.0)
 
 
-def training_data(model: ComplianceModel, train: Recording):
+def training_data(model: ComplianceModel, train, estimate_=None):
     """Training signals and reference torque, with the present model's torque *estimate* as the
     driver of path-dependent candidates (hysteresis is computed from the torque being
     estimated, causally, never from the reference sensor)."""
-    sig, torque = prepare(model, train)
-    t_est = estimate_torque(model, sig).torque
-    extras = dict(sig.extras)
-    extras[TORQUE_PATH] = t_est
-    return eqx.tree_at(lambda s: s.extras, sig, extras), torque
+    data = _as_data(model, train)
+    driver = estimate(model, data) if estimate_ is None else estimate_
+    return data.pair(driver)
 
 
-def score_candidates(model, train, options: DiscoverOptions, extra_columns):
-    """Library, spectra, and per-candidate (gain, fold gains, sindy-selected) for one step."""
-    sig, torque = training_data(model, train)
-    a_full = np.asarray(_design(model, sig, torque))
+def score_candidates(
+    model,
+    train,
+    options: DiscoverOptions,
+    extra_columns,
+    *,
+    folds=None,
+    blocks=None,
+    resamples=(),
+    est=None,
+):
+    """Library, spectra and per-candidate scores for one step.
+
+    **Returns:** `(scored, spectra, resid)`, `scored` a list of `(candidate, gain, fold gains,
+    sindy-selected, gains over the resampled fold assignments)`.
+    """
+    data = _as_data(model, train)
+    sig, torque = training_data(model, data, est)
+    a_full = design(model, sig, torque)
     active = np.asarray(model.active)
     a = a_full[:, active]
     y = np.asarray(sig.twist)
@@ -237,11 +293,12 @@ def score_candidates(model, train, options: DiscoverOptions, extra_columns):
         options=options.library,
         extra_columns=extra_columns,
         twist_sign=model.twist_sign,
+        compliance=small_torque_compliance(model),
     )
     if not cands:
         return [], spectra, resid
     cols = [candidate_columns(c.term, sig, torque) for c in cands]
-    basis = fold_basis(a, y, options.n_folds, options.block)
+    basis = fold_basis(a, y, options.n_folds, options.block, tests=folds)
     flat_cols, owner = [], []
     for i, c in enumerate(cols):
         for j in range(c.shape[1]):
@@ -252,20 +309,47 @@ def score_candidates(model, train, options: DiscoverOptions, extra_columns):
     )
     owner = np.asarray(owner)
     usable = [i for i, c in enumerate(cols) if np.isfinite(c).all() and np.ptp(c, axis=0).max() > 0]
-    gains = cv_gains(basis, [cols[i] for i in usable])
+    groups = [cols[i] for i in usable]
+    gains = cv_gains(basis, groups)
+    if len(resamples):
+        stats = block_grams(a, groups, y, blocks)
+        resampled = [cv_gains_by_blocks(stats, fb, options.n_folds) for fb in resamples]
+    else:
+        resampled = []
     scored = [
-        (cands[i], gain, folds, bool(selected[owner == i].any()))
-        for i, (gain, folds) in zip(usable, gains)
+        (
+            cands[i],
+            gain,
+            folds_,
+            bool(selected[owner == i].any()),
+            np.asarray([r[j] for r in resampled]),
+        )
+        for j, (i, (gain, folds_)) in enumerate(zip(usable, gains))
     ]
     return scored, spectra, resid
 
 
-def _best_per_key(scored):
-    best = {}
-    for cand, gain, folds, sel in scored:
+def small_torque_compliance(model: ComplianceModel) -> float:
+    """The compliance of the segment holding 0 N·m, rounded (a static term field)."""
+    j = int(np.searchsorted(np.asarray(model.knots), 0.0, side="right"))
+    return float(f"{float(np.asarray(model.k)[j]):.4g}")
+
+
+def _best_per_key(scored, min_gain):
+    """The best grid member of each key, with the key's stability: the share of resampled
+    fold assignments in which some member of the key removes at least `min_gain`."""
+    best, stable, members = {}, {}, {}
+    for cand, gain, folds, sel, res in scored:
+        hit = res >= min_gain if res.size else np.ones(1, bool) * (gain >= min_gain)
+        stable[cand.key] = stable.get(cand.key, np.zeros_like(hit)) | hit
+        members.setdefault(cand.key, []).append((gain, cand, folds))
         if cand.key not in best or gain > best[cand.key][1]:
             best[cand.key] = (cand, gain, folds, sel)
-    return sorted(best.values(), key=lambda s: -s[1])
+    out = [
+        (*v, float(np.mean(stable[k])), sorted(members[k], key=lambda m: -m[0]))
+        for k, v in best.items()
+    ]
+    return sorted(out, key=lambda s: -s[1])
 
 
 def discover(
@@ -290,9 +374,34 @@ def discover(
             raise DataError(f"{name} ({rec.source}) has no 'torque' column; the loop needs it")
     notes: list[str] = []
     model = baseline_model = calibrate_baseline(train, joint, options, notes)
-    base_metrics, base_est = _test_errors(model, test, joint.rated_torque)
-    base_twist = _twist_rms(model, test)
+    data = _as_data(model, train)
+    test_data = _as_data(model, test)
+    n_gaps = int(data.starts.sum()) - 1
+    if n_gaps:
+        notes.append(
+            f"TRAIN has {n_gaps} gap(s) (time steps over 3 sample periods): {n_gaps + 1} "
+            "segments; memory states restart and derivatives stop at each gap"
+        )
+    base_metrics, base_est = _test_errors(model, test_data, joint.rated_torque)
+    base_twist = _twist_rms(model, test_data)
     say(f"baseline: test torque RMS {base_metrics.rms:.4g} N·m, max {base_metrics.max:.4g} N·m")
+    # folds: whole contiguous blocks, no shorter than the residual's correlation length
+    est_train = estimate(model, data)
+    resid0 = data.twist - design(model, *data.pair()) @ np.asarray(model.coef)
+    block, note = cv_block_length(resid0, data.starts, options.n_folds, options.block)
+    if note:
+        notes.append(note)
+    blocks = contiguous_blocks(data.starts, block)
+    folds = fold_assignment(blocks, options.n_folds)
+    rng = np.random.default_rng(options.seed)
+    n_blocks = int(blocks.max()) + 1
+    # each resample deals the blocks to the folds in a random balanced order
+    resamples = [
+        rng.permutation(np.arange(n_blocks) % options.n_folds) for _ in range(options.n_resamples)
+    ]
+    cv = cross_validate(model, data, folds)
+    base_cv = cv
+    say(f"baseline: cross-validated torque RMS {cv.torque_rms:.4g} N·m on TRAIN")
     extra_columns = _usable_columns(train)
     steps: list[StepResult] = []
     excluded: set[str] = set()
@@ -300,60 +409,135 @@ def discover(
     spectra: dict = {}
     resid = None
     while True:
-        scored, spectra, resid = score_candidates(model, train, options, extra_columns)
-        ranked = _best_per_key([s for s in scored if s[0].key not in excluded])
+        scored, spectra, resid = score_candidates(
+            model,
+            data,
+            options,
+            extra_columns,
+            folds=folds,
+            blocks=blocks,
+            resamples=resamples,
+            est=est_train,
+        )
+        ranked = _best_per_key([s for s in scored if s[0].key not in excluded], options.min_gain)
         ranking = [
-            dict(key=c.key, cv_gain=g, min_fold_gain=float(np.min(f)), sindy=s, origin=c.origin)
-            for c, g, f, s in ranked[:10]
+            dict(
+                key=c.key,
+                cv_gain=g,
+                min_fold_gain=float(np.min(f)),
+                sindy=s,
+                stability=st,
+                origin=c.origin,
+            )
+            for c, g, f, s, st, _ in ranked[:10]
         ]
         if len(steps) >= options.max_effects:
             notes.append(f"stopped: reached max_effects = {options.max_effects}")
             break
-        chosen = next(
-            (
-                (cand, gain, folds)
-                for cand, gain, folds, sel in ranked
-                if sel and gain >= options.min_gain and np.all(folds >= options.min_gain / 2)
-            ),
-            None,
-        )
-        if chosen is None:
+        eligible = [
+            r for r in ranked if r[3] and r[1] >= options.min_gain and r[4] >= options.min_stability
+        ][: options.n_shortlist]
+        trials = []
+        for _, _, _, _, stab, members in eligible:
+            # the best grid member that calibrates to an invertible model (a hysteresis scale
+            # too sharp for its amplitude is not)
+            for gain, cand, folds_ in members[: options.n_grid_tries]:
+                if gain < options.min_gain:
+                    break
+                try:
+                    new_model, new_est = calibrate(
+                        model.with_effects(cand.term), data, notes, est_train
+                    )
+                    new_cv = cross_validate(new_model, data, folds, cv)
+                except (CalibrationError, InversionError) as err:
+                    notes.append(f"candidate {cand.key} could not be added: {err}")
+                    continue
+                for r in ranking:
+                    if r["key"] == cand.key:
+                        r["cv_torque_rms"] = new_cv.torque_rms
+                trials.append(
+                    (new_cv.torque_rms, cand, gain, folds_, stab, new_model, new_est, new_cv)
+                )
+                break
+        if not trials and eligible:
             notes.append(
-                "stopped: no candidate selected by the sparse regression removes at least "
-                f"{options.min_gain:.0%} of the cross-validated twist error (and half of that in "
-                "every fold)"
+                "stopped: the eligible candidates ("
+                + ", ".join(r[0].key for r in eligible)
+                + ") could not be calibrated to an invertible model"
             )
             break
-        cand, gain, folds = chosen
-        try:
-            data = training_data(model, train) if cand.term.torque_kind == "path" else train
-            new_model = _quiet_calibrate(model.with_effects(cand.term), data, notes).model
-            metrics, est = _test_errors(new_model, test, joint.rated_torque)
-        except (CalibrationError, InversionError) as err:
-            notes.append(f"candidate {cand.key} could not be added: {err}")
-            excluded.add(cand.key)
-            continue
-        model = new_model
+        if not trials:
+            notes.append(
+                "stopped: no candidate selected by the sparse regression removes at least "
+                f"{options.min_gain:.0%} of the cross-validated twist error in at least "
+                f"{options.min_stability:.0%} of {options.n_resamples} resampled fold assignments"
+            )
+            break
+        trials.sort(key=lambda x: x[0])
+        best = trials[0]
+        if not best[0] <= (1.0 - options.min_torque_gain) * cv.torque_rms:
+            tried = ", ".join(f"{t[1].key} {t[0]:.4g} N·m" for t in trials)
+            notes.append(
+                f"stopped: no candidate lowers the cross-validated torque error "
+                f"({cv.torque_rms:.4g} N·m) by {options.min_torque_gain:.0%} (tried: {tried})"
+            )
+            break
+        _, cand, gain, folds_, stab, new_model, new_est, new_cv = best
+        metrics, est = _test_errors(new_model, test_data, joint.rated_torque)
+        model, est_train, cv = new_model, new_est, new_cv
         steps.append(
             StepResult(
                 key=cand.key,
                 family=cand.family,
                 term=cand.term,
                 cv_gain=gain,
-                fold_gains=[float(x) for x in folds],
+                fold_gains=[float(x) for x in folds_],
                 test=metrics,
-                twist_rms_arcsec=_twist_rms(model, test),
+                twist_rms_arcsec=_twist_rms(model, test_data),
                 ranking=ranking,
                 spectra=spectra,
                 model=model,
                 torque_estimate=est,
+                stability=stab,
+                cv_torque_rms=new_cv.torque_rms,
+                cv_twist_rms_arcsec=new_cv.twist_rms_arcsec,
             )
         )
         say(
-            f"step {len(steps)}: added {cand.key} (CV gain {gain:.1%}); test torque RMS "
+            f"step {len(steps)}: added {cand.key} (CV twist gain {gain:.1%}, stability "
+            f"{stab:.0%}, CV torque {new_cv.torque_rms:.4g} N·m); test torque RMS "
             f"{metrics.rms:.4g} N·m, max {metrics.max:.4g} N·m"
         )
+    # amplitudes with intervals, and what is left
+    intervals = []
+    if steps:
+        sig_d, torque = data.pair(est_train)
+        a_final = design(model, sig_d, torque)
+        res_final = data.twist - a_final @ np.asarray(model.coef)
+        length = max(block, 2 * correlation_length(res_final, data.starts))
+        intervals = effect_intervals(model, a_final, data, est_train, length=length)
+        for s_, iv in zip(steps, intervals):
+            s_.amplitude = iv
+    corr = correlation_length(resid, data.starts) if resid is not None else 1
+    left = unexplained_structure(
+        resid if resid is not None else data.twist * 0.0,
+        spectra,
+        {
+            "torque": data.torque,
+            "omega_m": np.asarray(data.sig.omega_m),
+            "omega_l": np.asarray(data.sig.omega_l),
+        },
+        correlation_length=corr,
+    )
     final = steps[-1].test if steps else base_metrics
+    if final.rms > base_metrics.rms:
+        # TEST never chooses, so it can disagree with cross-validation: say so, loudly
+        notes.append(
+            f"warning: on TEST the final model's torque RMS ({final.rms:.4g} N·m) is "
+            f"{final.rms / base_metrics.rms - 1:.1%} above the starting model's "
+            f"({base_metrics.rms:.4g} N·m), although cross-validation on TRAIN lowered it from "
+            f"{base_cv.torque_rms:.4g} to {cv.torque_rms:.4g} N·m: TRAIN and TEST differ"
+        )
     return DiscoveryResult(
         baseline_model=baseline_model,
         baseline=base_metrics,
@@ -368,7 +552,24 @@ def discover(
         test=test,
         train_residual_final=resid,
         seconds=time.perf_counter() - t_start,
+        baseline_cv_torque_rms=base_cv.torque_rms,
+        baseline_cv_twist_rms_arcsec=base_cv.twist_rms_arcsec,
+        unexplained=left,
+        cv_block_samples=block,
     )
+
+
+def refit_structure(train, test, joint: Joint, terms, options: DiscoverOptions = DiscoverOptions()):
+    """TEST errors of the starting model plus `terms` (e.g. the true structure), calibrated by
+    the same pipeline as the loop's (hysteresis driven by the model's own estimate).
+
+    **Returns:** an [`hdjax.ErrorMetrics`][].
+    """
+    notes: list[str] = []
+    base = calibrate_baseline(train, joint, options, notes)
+    data = _as_data(base, train)
+    model, _ = calibrate(base.with_effects(*terms), data, notes, estimate(base, data))
+    return _test_errors(model, test, joint.rated_torque)[0]
 
 
 def residual_spectra(model: ComplianceModel, data, *, orders=(0.5, 8.0)) -> dict:
@@ -384,4 +585,11 @@ def residual_spectra(model: ComplianceModel, data, *, orders=(0.5, 8.0)) -> dict
     return out
 
 
-__all__ = ["DiscoverOptions", "DiscoveryResult", "StepResult", "discover", "HdjaxError"]
+__all__ = [
+    "DiscoverOptions",
+    "DiscoveryResult",
+    "StepResult",
+    "discover",
+    "refit_structure",
+    "HdjaxError",
+]

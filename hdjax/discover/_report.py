@@ -19,9 +19,12 @@ VOCABULARY = (
 )
 
 STOPPING_RULE = (
-    "add the best-ranked candidate selected by pysindy STLSQ that removes at least min_gain of "
-    "the model's cross-validated twist error (5 interleaved folds of the training data) and at "
-    "least half of min_gain in every fold; stop when none qualifies"
+    "a candidate is eligible when pysindy STLSQ selects it and it removes at least min_gain of "
+    "the model's cross-validated twist error (5 folds of whole contiguous blocks of TRAIN) in "
+    "the standard fold assignment and in at least min_stability of the resampled ones; of the "
+    "best eligible candidates, the one with the lowest cross-validated torque error (whole "
+    "pipeline per fold: calibration, then inversion) is added if it lowers that error by at "
+    "least min_torque_gain; stop when none does"
 )
 
 
@@ -35,6 +38,8 @@ def report_dict(result: DiscoveryResult, *, extra: dict | None = None) -> dict:
             "rms_pct": b.rms_pct,
             "max_pct": b.max_pct,
             "twist_rms_arcsec": result.baseline_twist_rms_arcsec,
+            "cv_torque_rms": result.baseline_cv_torque_rms,
+            "cv_twist_rms_arcsec": result.baseline_cv_twist_rms_arcsec,
         },
         "steps": [
             {
@@ -46,6 +51,10 @@ def report_dict(result: DiscoveryResult, *, extra: dict | None = None) -> dict:
                 "twist_rms_arcsec": s.twist_rms_arcsec,
                 "cv_gain": s.cv_gain,
                 "fold_gains": s.fold_gains,
+                "stability": s.stability,
+                "cv_torque_rms": s.cv_torque_rms,
+                "cv_twist_rms_arcsec": s.cv_twist_rms_arcsec,
+                "amplitude": s.amplitude,
                 "term": s.term.names(),
                 "ranking": s.ranking,
             }
@@ -56,6 +65,8 @@ def report_dict(result: DiscoveryResult, *, extra: dict | None = None) -> dict:
         "vocabulary": VOCABULARY,
         "stopping_rule": STOPPING_RULE,
         "last_ranking": result.final_ranking,
+        "unexplained": result.unexplained,
+        "cv_block_samples": result.cv_block_samples,
         "notes": result.notes,
         "final_model": result.final_model.to_dict(),
         "seconds": result.seconds,
@@ -200,15 +211,39 @@ def write_figures(result: DiscoveryResult, train, folder: Path) -> list[tuple[st
 
 def report_markdown(d: dict, figures: list[tuple[str, str]]) -> str:
     lines = ["# hdjax discover", ""]
-    lines.append("| step | effect | TEST RMS [N·m] | TEST max [N·m] | CV gain |")
-    lines.append("|---|---|---|---|---|")
+    lines.append(
+        "| step | effect | TEST RMS [N·m] | TEST max [N·m] | CV torque RMS [N·m] | "
+        "CV twist RMS [arcsec] | CV twist gain | stability | amplitude (95 % interval) |"
+    )
+    lines.append("|---|---|---|---|---|---|---|---|---|")
     b = d["baseline"]
-    lines.append(f"| 0 | starting model | {b['rms']:.4g} | {b['max']:.4g} | |")
+    lines.append(
+        f"| 0 | starting model | {b['rms']:.4g} | {b['max']:.4g} | {b['cv_torque_rms']:.4g} | "
+        f"{b['cv_twist_rms_arcsec']:.4g} | | | |"
+    )
     for i, s in enumerate(d["steps"], 1):
+        a = s.get("amplitude") or {}
+        amp = (
+            f"{a['arcsec']:.3g} arcsec [{a['arcsec_ci95'][0]:.3g}, {a['arcsec_ci95'][1]:.3g}]; "
+            f"{a['nm']:.3g} N·m [{a['nm_ci95'][0]:.3g}, {a['nm_ci95'][1]:.3g}]"
+            if a
+            else ""
+        )
         lines.append(
-            f"| {i} | `{s['effect']}` | {s['rms']:.4g} | {s['max']:.4g} | {s['cv_gain']:.1%} |"
+            f"| {i} | `{s['effect']}` | {s['rms']:.4g} | {s['max']:.4g} | "
+            f"{s['cv_torque_rms']:.4g} | {s['cv_twist_rms_arcsec']:.4g} | {s['cv_gain']:.1%} | "
+            f"{s['stability']:.0%} | {amp} |"
         )
     lines += ["", f"Stopping rule: {d['stopping_rule']}.", ""]
+    if d.get("unexplained"):
+        lines += ["Left unexplained (structure above the noise in the final TRAIN residual):", ""]
+        for u in d["unexplained"]:
+            what = f"order {u['order']:g}" if u["kind"] == "order" else "shape"
+            lines.append(
+                f"- {u['signal']}: {what}, amplitude {u['amplitude_arcsec']:.3g} arcsec "
+                f"({u['explained']:.1%} of the residual variance)"
+            )
+        lines.append("")
     for note in d["notes"]:
         lines.append(f"- {note}")
     lines.append("")

@@ -1,0 +1,105 @@
+"""Segments of a recording with gaps, and cross-validation folds of whole contiguous blocks.
+
+A recording with gaps is a list of contiguous segments. A gap is a time step longer than
+`GAP_FACTOR` (3) median sample periods, which is also what the joins of a block split (TRAIN
+made of every other block, say) look like. Memory states restart at a gap and derivatives never
+cross one (see [`hdjax.discover.pipeline_signals`][]).
+
+Cross-validation holds out whole contiguous blocks that never straddle a gap and are no
+shorter than the residual's correlation time (so a held-out block is not predicted from its
+own correlated neighbours). The standard assignment interleaves the blocks (block $b$ goes to
+fold $b \\bmod K$, so every fold spans the whole record); the resampled ones, for stability
+selection, deal the blocks to the folds in a random balanced order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._features import find_gaps
+
+GAP_FACTOR = 3.0
+
+
+def segment_starts(t) -> np.ndarray:
+    """A boolean per sample, true at the first sample of each contiguous segment."""
+    t = np.asarray(t, np.float64)
+    start = np.zeros(t.shape, bool)
+    if t.size:
+        start[0] = True
+        start[find_gaps(t, GAP_FACTOR) + 1] = True
+    return start
+
+
+def segment_ids(t) -> np.ndarray:
+    """The index of the contiguous segment each sample belongs to."""
+    return np.cumsum(segment_starts(t)) - 1
+
+
+def correlation_length(residual, starts=None, *, max_lag: int = 2000) -> int:
+    """Lag [samples] at which the residual's autocorrelation first falls below $1/e$.
+
+    Computed within segments only (products across a gap are left out). At least 1.
+    """
+    r = np.asarray(residual, np.float64)
+    r = r - r.mean()
+    n = r.size
+    var = float(np.dot(r, r))
+    if n < 3 or var == 0.0:
+        return 1
+    seg = np.zeros(n, int) if starts is None else np.cumsum(starts) - 1
+    max_lag = min(max_lag, n // 2)
+    for lag in range(1, max_lag):
+        same = seg[lag:] == seg[:-lag]
+        if not same.any():
+            return lag
+        num = float(np.dot(r[lag:][same], r[:-lag][same])) / same.sum()
+        if num <= var / n / np.e:
+            return lag
+    return max_lag
+
+
+def contiguous_blocks(starts, length: int) -> np.ndarray:
+    """Block index per sample: blocks of about `length` samples that never cross a gap.
+
+    Each segment is cut into `max(1, round(len / length))` nearly equal blocks.
+    """
+    starts = np.asarray(starts, bool)
+    n = starts.size
+    bounds = np.r_[np.flatnonzero(starts), n]
+    out = np.empty(n, int)
+    b = 0
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        m = max(1, int(round((hi - lo) / max(1, length))))
+        edges = np.linspace(lo, hi, m + 1).round().astype(int)
+        for j in range(m):
+            out[edges[j] : edges[j + 1]] = b
+            b += 1
+    return out
+
+
+def fold_assignment(blocks: np.ndarray, n_folds: int, *, rng=None) -> list[np.ndarray]:
+    """Held-out index sets: block $b$ to fold $b \\bmod K$, or a random balanced deal (`rng`)."""
+    n_blocks = int(blocks.max()) + 1
+    order = np.arange(n_blocks) if rng is None else rng.permutation(n_blocks)
+    fold_of_block = np.empty(n_blocks, int)
+    fold_of_block[order] = np.arange(n_blocks) % n_folds
+    fold = fold_of_block[blocks]
+    return [np.flatnonzero(fold == f) for f in range(n_folds)]
+
+
+def cv_block_length(residual, starts, n_folds: int, minimum: int) -> tuple[int, str | None]:
+    """Block length for the folds: the correlation length, at least `minimum` samples, and at
+    most what leaves two blocks per fold; a note when the cap binds."""
+    n = np.asarray(residual).size
+    corr = correlation_length(residual, starts)
+    cap = max(1, n // (2 * n_folds))
+    length = max(minimum, corr)
+    note = None
+    if length > cap:
+        note = (
+            f"the residual stays correlated over {corr} samples, longer than the "
+            f"{cap}-sample blocks that leave two per cross-validation fold; folds use {cap}"
+        )
+        length = cap
+    return length, note

@@ -1,0 +1,277 @@
+"""The whole estimation pipeline, as the loop runs it on TRAIN, on each fold and on TEST.
+
+Everything a candidate is judged by goes through the same three steps: derive the signals
+(derivatives that never cross a gap, a marker where memory states restart), calibrate by least
+squares (Song et al. eqs. (15)-(17)), and invert for torque (eqs. (26)-(27)). Path-dependent
+terms (hysteresis) need a torque path at calibration; it is the model's *own* estimate,
+computed causally exactly as at estimation, found by a few rounds of calibrate-then-estimate
+starting from the previous model's estimate. The reference torque never drives a state.
+
+The cross-validated torque error refits the structure on each fold's training part (the same
+calibration, the same driver rounds from that fold's previous estimate) and inverts the whole
+TRAIN record with the fold's coefficients, scoring the held-out samples only: the states run
+through the record causally from the estimate, as they run through TEST.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import scipy.linalg
+
+from .._errors import InversionError
+from .._recording import Recording
+from ..compliance import ComplianceModel, calibrate_lstsq, signals_from_recording
+from ..compliance._inversion import _estimate
+from ..compliance._lstsq import _design
+from ..compliance._terms import SEGMENT_START, TORQUE_PATH
+from ._folds import segment_starts
+
+DRIVER_ROUNDS = 3
+"""Calibrate-then-estimate rounds that make a hysteresis state's calibration driver the
+model's own estimate (the change after the third round is far below the noise)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class PipelineData:
+    """Signals (gap-safe), reference torque and segment starts of one recording."""
+
+    sig: object
+    torque: np.ndarray
+    starts: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.torque.size)
+
+    @property
+    def twist(self) -> np.ndarray:
+        return np.asarray(self.sig.twist)
+
+    def with_driver(self, driver):
+        """The signals with `driver` as the torque path of hysteresis columns."""
+        extras = dict(self.sig.extras)
+        extras[TORQUE_PATH] = jnp.asarray(driver, jnp.float64)
+        return eqx.tree_at(lambda s: s.extras, self.sig, extras)
+
+    def pair(self, driver=None):
+        """`(Signals, torque)` for calibration, with the driver when given."""
+        sig = self.sig if driver is None else self.with_driver(driver)
+        return sig, jnp.asarray(self.torque)
+
+
+def pipeline_signals(rec: Recording, ratio: float, twist_sign: float, velocity: str):
+    """Model signals of a recording with gaps: velocities at the first sample after a gap take
+    the next sample's value (a backward difference across a gap is no derivative), and the
+    signal `SEGMENT_START` marks where memory states restart. **Returns:** a PipelineData."""
+    sig = signals_from_recording(rec, ratio, twist_sign, velocity=velocity)
+    starts = segment_starts(rec.t)
+    fix = np.flatnonzero(starts)[1:]
+    if fix.size:
+        n = starts.size
+        nxt = np.minimum(fix + 1, n - 1)
+        ok = ~starts[nxt] & (nxt != fix)  # a one-sample segment has no derivative: 0
+        repl = {}
+        for name in ("omega_m", "omega_l"):
+            w = np.asarray(getattr(sig, name)).copy()
+            w[fix] = np.where(ok, w[nxt], 0.0)
+            repl[name] = jnp.asarray(w)
+        sig = eqx.tree_at(lambda s: (s.omega_m, s.omega_l), sig, (repl["omega_m"], repl["omega_l"]))
+    extras = dict(sig.extras)
+    extras[SEGMENT_START] = jnp.asarray(starts.astype(np.float64))
+    sig = eqx.tree_at(lambda s: s.extras, sig, extras)
+    torque = None if rec.torque is None else np.asarray(rec.torque, np.float64)
+    return PipelineData(sig, torque, starts)
+
+
+HYSTERESIS_MARGIN = 0.25
+"""Least share of the compliance that must remain in the twist slope right after a torque
+reversal once a hysteresis state is added (below it the inversion amplifies the twist noise
+more than four-fold there, and at zero it has no solution)."""
+
+
+def hysteresis_invertible(model: ComplianceModel) -> str:
+    """Why a model's hysteresis cannot be inverted well (its twist slope right after a reversal,
+    $-2|c|/T_h$, leaves less than `HYSTERESIS_MARGIN` of the compliance), else `""`."""
+    i = model.n_coef - model.n_effect
+    coef = np.asarray(model.coef)
+    act = np.asarray(model.active[: model.n_segments])
+    k_min = float(np.asarray(model.k)[act].min())
+    for term in model.effect_terms:
+        m = len(term.names())
+        if term.torque_kind == "path":
+            c = float(coef[i])
+            worst = 2.0 * abs(c) / term.torque_scale
+            if c < 0 and worst > (1.0 - HYSTERESIS_MARGIN) * k_min:
+                return (
+                    f"{term.key} with scale {term.torque_scale:.4g} N·m: its twist slope after a "
+                    f"reversal ({-worst:.3g} rad/(N·m)) leaves less than "
+                    f"{HYSTERESIS_MARGIN:.0%} of the compliance ({k_min:.3g} rad/(N·m))"
+                )
+        i += m
+    return ""
+
+
+def has_path(model: ComplianceModel) -> bool:
+    return any(t.torque_kind == "path" for t in model.effect_terms)
+
+
+def canonical(model: ComplianceModel) -> ComplianceModel:
+    """`model` with the torque range set to the rated range.
+
+    The range is a static field that only sets the `in_range` flags; each calibration sets it
+    to the data's range, which would make every compiled function (design, inversion) compile
+    again for every fit. The loop uses torques only, so it runs on this canonical form.
+    """
+    rng = (-float(model.rated_torque), float(model.rated_torque))
+    if tuple(model.torque_range) == rng:
+        return model
+    d = {f: getattr(model, f) for f in model.__dataclass_fields__}
+    d["torque_range"] = rng
+    return ComplianceModel(**d)
+
+
+def design(model: ComplianceModel, sig, torque) -> np.ndarray:
+    """The design matrix (eq. (15)) as a NumPy array, compiled once per structure."""
+    return np.asarray(_design(canonical(model), sig, jnp.asarray(torque)))
+
+
+def estimate(model: ComplianceModel, data: PipelineData) -> np.ndarray:
+    """Torque estimate by inversion (eqs. (26)-(27)); non-finite values where it fails."""
+    return np.asarray(_estimate(canonical(model), data.sig).torque)
+
+
+def quiet_calibrate(model, pair, notes, throw=True):
+    """`calibrate_lstsq` with its warnings turned into notes."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = calibrate_lstsq(model, pair, throw=throw)
+    for w in caught:
+        notes.append(str(w.message))
+    return res
+
+
+def calibrate(structure: ComplianceModel, data: PipelineData, notes, previous_estimate):
+    """Calibrate `structure` on all of `data`; with path terms, driver rounds from
+    `previous_estimate`. **Returns:** (model, its torque estimate on `data`)."""
+    structure = canonical(structure)
+    if not has_path(structure):
+        model = quiet_calibrate(structure, data.pair(), notes).model
+        return model, estimate(model, data)
+    driver = previous_estimate
+    for _ in range(DRIVER_ROUNDS):
+        model = quiet_calibrate(structure, data.pair(driver), notes).model
+        why = hysteresis_invertible(model)
+        if why:
+            raise InversionError(why)
+        est = estimate(model, data)
+        if not np.all(np.isfinite(est)):
+            raise InversionError(
+                f"the model with {structure.effect_keys[-1]} gives a non-finite torque estimate"
+            )
+        driver = est
+    return model, driver
+
+
+@dataclasses.dataclass
+class CrossValidation:
+    """Held-out errors of one structure over one fold assignment."""
+
+    torque_rms: float
+    twist_rms_arcsec: float
+    fold_torque_rms: list[float]
+    estimates: list[np.ndarray]
+    """Per fold, the fold model's estimate over the whole record (the next structure's
+    driver rounds start from it)."""
+
+
+def _fold_solve(a: np.ndarray, y: np.ndarray) -> np.ndarray:
+    s = np.sqrt((a * a).sum(axis=0))
+    keep = s > 0
+    beta = np.zeros(a.shape[1])
+    beta[keep] = scipy.linalg.lstsq(a[:, keep] / s[keep], y)[0] / s[keep]
+    return beta
+
+
+MIN_FOLD_SEGMENT_SAMPLES = 30
+
+
+def _fold_model(model: ComplianceModel, coef: np.ndarray, train_torque) -> ComplianceModel:
+    """The structure with a fold's coefficients; a torque segment the fold's training part
+    barely reaches (fewer than `MIN_FOLD_SEGMENT_SAMPLES` samples) or calibrates to a
+    non-positive compliance is left out of that fold's inversion, as the full calibration
+    leaves out segments without data."""
+    n_seg = model.n_segments
+    seg = np.searchsorted(np.asarray(model.knots), train_torque, side="right")
+    counts = np.bincount(seg, minlength=n_seg)
+    active = list(model.active)
+    for j in range(n_seg):
+        if active[j] and (counts[j] < MIN_FOLD_SEGMENT_SAMPLES or not coef[j] > 0):
+            active[j] = False
+            coef[j] = 0.0
+    fitted = eqx.tree_at(lambda m: m.coef, model, jnp.asarray(coef))
+    if tuple(active) == tuple(model.active) or not any(active[:n_seg]):
+        return fitted
+    d = {f: getattr(fitted, f) for f in fitted.__dataclass_fields__}
+    d["active"] = tuple(active)
+    return ComplianceModel(**d)
+
+
+def cross_validate(
+    model: ComplianceModel,
+    data: PipelineData,
+    folds: list[np.ndarray],
+    previous: CrossValidation | None = None,
+) -> CrossValidation:
+    """Cross-validated torque and twist error of `model`'s structure (see the module docstring).
+
+    `model` is the structure calibrated on all of TRAIN: its active coefficients and torque
+    range are kept, so every fold model compiles to the same program.
+    """
+    path = has_path(model)
+    active = np.asarray(model.active)
+    y = data.twist
+    n = data.n
+    rounds = DRIVER_ROUNDS if path else 1
+    sse_t, sse_w, cnt, per_fold, ests = 0.0, 0.0, 0, [], []
+    model = canonical(model)
+    torque = jnp.asarray(data.torque)
+    fixed = None if path else np.asarray(_design(model, data.sig, torque))
+    for f, te in enumerate(folds):
+        train_rows = np.ones(n, bool)
+        train_rows[te] = False
+        driver = previous.estimates[f] if (path and previous is not None) else data.torque * 0.0
+        for _ in range(rounds):
+            a = (
+                fixed
+                if fixed is not None
+                else np.asarray(_design(model, data.with_driver(driver), torque))
+            )
+            coef = np.zeros(model.n_coef)
+            coef[active] = _fold_solve(a[train_rows][:, active], y[train_rows])
+            fold_model = _fold_model(model, coef, data.torque[train_rows])
+            est = estimate(fold_model, data)
+            driver = np.where(np.isfinite(est), est, 0.0)
+        # score the held-out samples whose reference torque lies inside the range the fold's
+        # training part calibrates (as TEST flags estimates outside the calibrated range); the
+        # mask depends on the data only, so every structure is scored on the same samples
+        lo, hi = data.torque[train_rows].min(), data.torque[train_rows].max()
+        te = te[(data.torque[te] >= lo) & (data.torque[te] <= hi)]
+        e = est[te] - data.torque[te]
+        w = a[te] @ coef - y[te]
+        sse = float(np.sum(e**2)) if np.all(np.isfinite(e)) else np.inf
+        sse_t += sse
+        sse_w += float(np.sum(w**2))
+        cnt += te.size
+        per_fold.append(float(np.sqrt(sse / max(te.size, 1))))
+        ests.append(est)
+    return CrossValidation(
+        torque_rms=float(np.sqrt(sse_t / max(cnt, 1))),
+        twist_rms_arcsec=float(np.sqrt(sse_w / max(cnt, 1)) * 180 * 3600 / np.pi),
+        fold_torque_rms=per_fold,
+        estimates=ests,
+    )
