@@ -14,7 +14,7 @@ from .._errors import HdjaxError
 from .._io import did_you_mean
 from ._common import Parser, ParserExit, UsageError
 
-COMMANDS = ("run", "sweep", "estimate", "discover", "bench")
+COMMANDS = ("run", "sweep", "estimate", "discover", "bench", "convert")
 
 DESCRIPTION = """\
 Torque estimation for robotic joints with harmonic drives (Song et al. 2019), in JAX.
@@ -43,6 +43,9 @@ def _parser() -> Parser:
         add_help=False,
     )
     _bench.add_parser(sub)
+    from . import _convert
+
+    _convert.add_parser(sub)
     return p
 
 
@@ -84,6 +87,9 @@ def _dispatch(argv: list[str]) -> int:
     sub = parser._subparsers._group_actions[0].choices[argv[0]]
     args = sub.parse_strict(argv[1:])
     handlers = {"run": _run, "sweep": _sweep, "estimate": _estimate, "bench": _bench}
+    from . import _convert
+
+    handlers["convert"] = _convert
     return handlers[argv[0]].command(args, sub)
 
 
