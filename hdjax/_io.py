@@ -274,13 +274,16 @@ def load_npz(path, columns: ColumnMap | None = None, *, check_units: bool = True
 
 
 def load_recording(path, columns: ColumnMap | None = None, *, check_units: bool = True):
-    """Load a recording from `.csv` or `.npz`, chosen by the file's suffix."""
+    """Load a recording chosen by the file's suffix: `.csv`, `.npz`, or a format of
+    `hdjax._formats` (Parquet, HDF5 / MATLAB v7.3, MCAP)."""
     suffix = Path(path).suffix.lower()
     if suffix == ".csv":
         return load_csv(path, columns, check_units=check_units)
     if suffix == ".npz":
         return load_npz(path, columns, check_units=check_units)
-    raise DataError(f"{path}: unknown recording format {suffix!r}; use .csv or .npz")
+    from ._formats import load as load_other  # Parquet, HDF5, MATLAB v7.3, MCAP
+
+    return load_other(path, columns, check_units=check_units)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -17,7 +17,7 @@ from .._errors import HdjaxError
 from .._io import did_you_mean
 from ._common import Parser, ParserExit, UsageError
 
-COMMANDS = ("run", "sweep", "estimate", "discover", "bench")
+COMMANDS = ("run", "sweep", "estimate", "discover", "bench", "convert")
 
 DESCRIPTION = """\
 Torque estimation for robotic joints with harmonic drives (Song et al. 2019), in JAX.
@@ -43,6 +43,9 @@ def _parser() -> Parser:
     _estimate.add_parser(sub)
     _discover.add_parser(sub)
     _bench.add_parser(sub)
+    from . import _convert
+
+    _convert.add_parser(sub)
     return p
 
 
@@ -74,6 +77,9 @@ def _dispatch(argv: list[str]) -> int:
         "discover": _discover,
         "bench": _bench,
     }
+    from . import _convert
+
+    handlers["convert"] = _convert
     return handlers[argv[0]].command(args, sub)
 
 
