@@ -149,6 +149,7 @@ def run_sweep(
                     isinstance(values[i], int) and not isinstance(values[i], bool) for i in todo
                 )
                 and not (setting == "model.fourier_order" and exp["model"]["kinematic"] != "paper")
+                and not exp["fit"]["chunk"]  # streamed: each member by its own chunked fit
             )
             if nested:
                 results, shared = _members_nested(exp, setting, values, todo, cfgs, ds, progress)
