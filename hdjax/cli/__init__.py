@@ -18,7 +18,7 @@ from .._errors import HdjaxError
 from .._io import did_you_mean
 from ._common import Parser, ParserExit, UsageError
 
-COMMANDS = ("run", "sweep", "estimate", "discover", "bench", "convert")
+COMMANDS = ("run", "sweep", "estimate", "discover", "bench", "convert", "fleet")
 
 DESCRIPTION = """\
 Torque estimation for robotic joints with harmonic drives (Song et al. 2019), in JAX.
@@ -49,9 +49,10 @@ def _parser() -> Parser:
     _estimate.add_parser(sub)
     _discover.add_parser(sub)
     _bench.add_parser(sub)
-    from . import _convert
+    from . import _convert, _fleet
 
     _convert.add_parser(sub)
+    _fleet.add_parser(sub)
     return p
 
 
@@ -83,9 +84,9 @@ def _dispatch(argv: list[str]) -> int:
         "discover": _discover,
         "bench": _bench,
     }
-    from . import _convert
+    from . import _convert, _fleet
 
-    handlers["convert"] = _convert
+    handlers["convert"], handlers["fleet"] = _convert, _fleet
     return handlers[argv[0]].command(args, sub)
 
 
