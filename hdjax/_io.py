@@ -274,27 +274,46 @@ def load_npz(path, columns: ColumnMap | None = None, *, check_units: bool = True
 
 
 def load_recording(path, columns: ColumnMap | None = None, *, check_units: bool = True):
-    """Load a recording from `.csv` or `.npz`, chosen by the file's suffix."""
+    """Load a recording chosen by the file's suffix: `.csv`, `.npz`, or a format of
+    `hdjax._formats` (Parquet, HDF5 / MATLAB v7.3, MCAP)."""
     suffix = Path(path).suffix.lower()
     if suffix == ".csv":
         return load_csv(path, columns, check_units=check_units)
     if suffix == ".npz":
         return load_npz(path, columns, check_units=check_units)
-    raise DataError(f"{path}: unknown recording format {suffix!r}; use .csv or .npz")
+    from ._formats import load as load_other  # Parquet, HDF5, MATLAB v7.3, MCAP
+
+    return load_other(path, columns, check_units=check_units)
 
 
 # ---------------------------------------------------------------------------------------------
 # Writing
 
 
+def _umask() -> int:
+    """The process's umask (read without changing it where /proc allows)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def atomic_write_bytes(path, data: bytes) -> None:
-    """Write `data` to `path` through a temporary file and a rename (never half-written)."""
+    """Write `data` to `path` through a temporary file and a rename (never half-written); the
+    file gets the mode a plain `open` would give it (0644 under the usual umask 022)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; results follow the umask
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

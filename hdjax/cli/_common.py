@@ -65,6 +65,9 @@ class Progress:
         self.t0 = time.perf_counter()
 
     def __call__(self, message: str) -> None:
+        from .._signals import check
+
+        check()  # a signal whose exception was swallowed ends the command here
         if self.quiet:
             return
         stream = self.stream or sys.stderr
@@ -97,3 +100,34 @@ def add_common(p: argparse.ArgumentParser) -> None:
         'values are TOML: 4, 1.5, true, [20, 20], "text")',
     )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress lines on stderr")
+
+
+def experiment_inputs(exp) -> list:
+    """Every file an experiment reads: the config and each existing file its `[data]` table
+    names (train, test and any other file setting), for the output rules of
+    [`hdjax.report.check_output_dir`][]."""
+    from pathlib import Path
+
+    from ..config._dataset import resolve_path
+
+    paths = [exp.path] if getattr(exp, "path", None) is not None else []
+
+    def walk(v):
+        if isinstance(v, str):
+            if not v or len(v) > 4096:
+                return
+            try:
+                p = resolve_path(exp, v)
+                if p.exists():
+                    paths.append(Path(p))
+            except (OSError, ValueError):
+                pass
+        elif isinstance(v, dict):
+            for x in v.values():
+                walk(x)
+        elif isinstance(v, list | tuple):
+            for x in v:
+                walk(x)
+
+    walk(exp.get("data", {}))
+    return paths

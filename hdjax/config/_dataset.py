@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import ConfigError
-from .._io import ColumnMap, load_csv, load_npz
+from .._io import ColumnMap, load_csv, load_npz, load_recording
 from .._joint import Joint
 from .._recording import Recording, make_recording
 from ._schema import joint_of
@@ -115,7 +115,7 @@ def resolve_path(exp, name: str) -> Path:
 
 def _load(path: Path, fmt: str, cmap: ColumnMap, check_units: bool) -> Recording:
     if fmt == "auto":
-        fmt = "npz" if path.suffix.lower() == ".npz" else "csv"
+        return load_recording(path, cmap, check_units=check_units)
     loader = load_npz if fmt == "npz" else load_csv
     return loader(path, cmap, check_units=check_units)
 
