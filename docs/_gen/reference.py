@@ -232,6 +232,31 @@ def _argument_docs(docstring: str) -> dict[str, str]:
     return docs
 
 
+def _schema_comments() -> dict[tuple[str, str], str]:
+    """Comments written directly above a key in the SCHEMA literal of hdjax/config/_schema.py:
+    (table, key) -> text. They describe a key when settings.toml does not."""
+    lines = (PACKAGE / "config" / "_schema.py").read_text().splitlines()
+    out: dict[tuple[str, str], str] = {}
+    table = None
+    comment: list[str] = []
+    for line in lines:
+        stripped = line.strip()
+        m_table = re.match(r'"(\w+)": \{$', stripped)
+        m_key = re.match(r'"(\w+)": \(', stripped)
+        if m_table and line.startswith("    ") and not line.startswith("        "):
+            table, comment = m_table.group(1), []
+        elif m_key and table:
+            text = " ".join(comment).strip()
+            if text:
+                out[(table, m_key.group(1))] = text
+            comment = []
+        elif stripped.startswith("#"):
+            comment.append(stripped.lstrip("#").strip())
+        else:
+            comment = []
+    return out
+
+
 def _meanings() -> dict:
     return tomllib.loads((HERE / "settings.toml").read_text())
 
@@ -244,6 +269,7 @@ def config_page() -> str:
 
     meanings = _meanings()
     schema_meanings = meanings.get("experiment_file", {})
+    comments = _schema_comments()
     problems = []
     out = [
         GENERATED_NOTE.format(source="hdjax/config/_schema.py and docs/_gen/settings.toml"),
@@ -277,10 +303,11 @@ def config_page() -> str:
             continue
         given = schema_meanings.get(table, {})
         for key, (default, check) in _schema.SCHEMA[table].items():
-            meaning = given.get(key)
+            meaning = given.get(key, comments.get((table, key)))
             if meaning is None:
                 problems.append(
-                    f"[{table}] {key} has no meaning in docs/_gen/settings.toml "
+                    f"[{table}] {key} has no meaning: add a comment above it in "
+                    f"hdjax/config/_schema.py or a line to docs/_gen/settings.toml "
                     f"[experiment_file.{table}]"
                 )
             out.append(
