@@ -73,7 +73,8 @@ def table_bytes(rows: list[dict]) -> bytes:
 
 
 def write_table(rows: list[dict], path) -> None:
-    """Write the rows as one Parquet table, atomically (see [`table_bytes`][])."""
+    """Write the rows as one Parquet table, atomically: the fixed columns, then one
+    `coef:NAME` column per coefficient any row has (null where a joint's model lacks it)."""
     from .._io import atomic_write_bytes
 
     atomic_write_bytes(path, table_bytes(rows))
