@@ -157,7 +157,7 @@ class ColumnMap:
     **Arguments:**
 
     - `columns`: schema name (`t`, `theta_m`, `theta_l`, `current`, `torque`) to a
-      [`hdjax.ColumnSpec`][]; unmapped schema names are read from a column of the same name.
+      `ColumnSpec`; unmapped schema names are read from a column of the same name.
     - `extras`: extra column name to spec; `None` keeps every other numeric column of the file
       under its own name, an empty mapping keeps none.
     - `encoding`: the text encoding of CSV files (default UTF-8, with or without a byte-order

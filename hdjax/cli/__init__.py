@@ -10,6 +10,7 @@ or option gets a "did you mean" answer. SIGINT and SIGTERM end a command with ex
 from __future__ import annotations
 
 import errno
+import os
 import sys
 import warnings
 
@@ -17,7 +18,7 @@ from .._errors import HdjaxError
 from .._io import did_you_mean
 from ._common import Parser, ParserExit, UsageError
 
-COMMANDS = ("run", "sweep", "estimate", "discover", "bench", "convert")
+COMMANDS = ("run", "sweep", "estimate", "discover", "bench", "convert", "fleet")
 
 DESCRIPTION = """\
 Torque estimation for robotic joints with harmonic drives (Song et al. 2019), in JAX.
@@ -37,15 +38,21 @@ def _parser() -> Parser:
 
     p = Parser(prog="hdjax", description=DESCRIPTION, epilog=EXAMPLE)
     p.add_argument("--version", action="store_true", help="print the version and exit")
+    p.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="do not use the compilation cache in $XDG_CACHE_HOME/hdjax (any command takes it)",
+    )
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     _run.add_parser(sub)
     _sweep.add_parser(sub)
     _estimate.add_parser(sub)
     _discover.add_parser(sub)
     _bench.add_parser(sub)
-    from . import _convert
+    from . import _convert, _fleet
 
     _convert.add_parser(sub)
+    _fleet.add_parser(sub)
     return p
 
 
@@ -77,10 +84,24 @@ def _dispatch(argv: list[str]) -> int:
         "discover": _discover,
         "bench": _bench,
     }
-    from . import _convert
+    from . import _convert, _fleet
 
-    handlers["convert"] = _convert
+    handlers["convert"], handlers["fleet"] = _convert, _fleet
     return handlers[argv[0]].command(args, sub)
+
+
+def _compilation_cache(argv: list[str]) -> list[str]:
+    """Turn JAX's persistent compilation cache on (off with `--no-cache`, accepted by every
+    command, or `HDJAX_NO_CACHE=1`); returns `argv` without `--no-cache`."""
+    from .._cache import disable_compilation_cache, enable_compilation_cache
+
+    end = argv.index("--") if "--" in argv else len(argv)
+    off = "--no-cache" in argv[:end] or os.environ.get("HDJAX_NO_CACHE", "") not in ("", "0")
+    if off:
+        disable_compilation_cache()
+    else:
+        enable_compilation_cache()
+    return [a for i, a in enumerate(argv) if not (a == "--no-cache" and i < end)]
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
@@ -140,6 +161,7 @@ def main(argv=None) -> int:
         warnings.simplefilter("always")
         warnings.showwarning = _show_warning
         try:
+            argv = _compilation_cache(argv)
             code = _dispatch(argv)
         except Interrupted as done:
             return interrupted(done.signum)

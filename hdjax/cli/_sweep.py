@@ -181,6 +181,7 @@ def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh):
                     isinstance(values[i], int) and not isinstance(values[i], bool) for i in todo
                 )
                 and not (setting == "model.fourier_order" and exp["model"]["kinematic"] != "paper")
+                and not exp["fit"]["chunk"]  # streamed: each member by its own chunked fit
             )
             if nested:
                 results, shared = _members_nested(exp, setting, values, todo, cfgs, ds, progress)

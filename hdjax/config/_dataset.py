@@ -258,8 +258,8 @@ def synthetic_recording(
     $T / (N K_t)$ plus a friction-like part and 1 % noise; the twist is the five-segment
     flexspline of eq. (7) (knots $\\pm\\tau_0/3, \\pm 2\\tau_0/3$) with the
     paper's k-shape scaled to $k_1 = 1/(6.7\cdot10^4)$ rad/N·m, plus a cubic polynomial in the
-    normalised current ([`SYNTHETIC_POLY`][]), a first-order kinematic error in the paper's form
-    (eq. (9), [`SYNTHETIC_FOURIER`][]) and white noise of `noise_arcsec`.
+    normalised current (`SYNTHETIC_POLY`), a first-order kinematic error in the paper's form
+    (eq. (9), `SYNTHETIC_FOURIER`) and white noise of `noise_arcsec`.
     """
     rng = np.random.default_rng(seed)
     tau0, n_ratio = joint.rated_torque, joint.ratio

@@ -112,8 +112,8 @@ def calibrate(cfg: dict, model, train: list[Recording], warn=None):
     """
     from ..compliance import calibrate_lstsq, calibrate_rls
 
-    data = stacked_signals(model, train)
     fit = cfg["fit"]
+    data = None if fit.get("chunk") and fit["method"] == "lstsq" else stacked_signals(model, train)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if fit["method"] == "rls":
@@ -124,6 +124,11 @@ def calibrate(cfg: dict, model, train: list[Recording], warn=None):
                 forgetting=fit["forgetting"],
                 init_samples=fit["init_samples"] or None,
             )
+        elif data is None:
+            from ..compliance import RecordingStream, calibrate_stream
+
+            stream = RecordingStream.from_recordings(train, fit["chunk"])
+            result = calibrate_stream(model, stream, chunk=fit["chunk"], throw=False)
         else:
             result = calibrate_lstsq(model, data, throw=False)
     for w in caught:

@@ -169,6 +169,9 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "forgetting": (1.0, _num(lo=1e-6, hi=1.0)),
         "block": (256, _int(1)),
         "init_samples": (0, _optional(_int(1))),
+        # > 0: least squares accumulated over chunks of this many samples (memory bounded by
+        # the chunk, not the log); 0: the whole design at once
+        "chunk": (0, _optional(_int(16))),
     },
     "network": {
         "enabled": (True, _bool),
@@ -286,6 +289,12 @@ def _cross_checks(cfg: dict, where: str) -> None:
                 f"{where} [data]: give test files (test = [...]) or a split fraction (e.g. "
                 "split = 0.3 keeps the last 30% of each train file for testing)"
             )
+    if cfg["fit"]["chunk"] and cfg["fit"]["method"] != "lstsq":
+        raise ConfigError(
+            f"{where} [fit]: chunk = {cfg['fit']['chunk']} streams the least-squares fit; "
+            f'method = "{cfg["fit"]["method"]}" already runs block by block (use block = ...) '
+            "or set chunk = 0"
+        )
     sweep = cfg["sweep"]
     check_sweep_setting(sweep["setting"], where=f"{where} [sweep] setting")
 
