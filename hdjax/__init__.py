@@ -14,13 +14,18 @@ Sub-packages (imported on first access, so `import hdjax` stays light):
 - `hdjax.fit`: joint gradient fitting of compliance, network and plant.
 - `hdjax.discover`: the residual loop (find, trace, add, refit, report).
 - `hdjax.strain`: Hashimoto et al. (1993) strain-gauge sensing and joint torque control.
+- `hdjax.reference`: joint-torque references from a force/torque sensor and the arm's Jacobian.
 - `hdjax.report`: metrics, figures and reports.
 """
 
-import importlib
-import importlib.metadata
+from ._signals import guard_startup as _guard_startup
 
-import jax
+_guard_startup()  # the `hdjax` command: a signal while JAX is imported exits at once (130/143)
+
+import importlib  # noqa: E402
+import importlib.metadata  # noqa: E402
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
@@ -57,7 +62,17 @@ try:
 except importlib.metadata.PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0+unknown"
 
-_SUBPACKAGES = ("compliance", "plant", "network", "fit", "discover", "strain", "report", "config")
+_SUBPACKAGES = (
+    "compliance",
+    "plant",
+    "network",
+    "fit",
+    "discover",
+    "strain",
+    "reference",
+    "report",
+    "config",
+)
 
 
 def __getattr__(name: str):

@@ -59,7 +59,7 @@ def load_with_reference(
     private = {f"{_PREFIX}{n}": ColumnSpec(source=n) for n in names}
     if columns.extras is None:  # "keep every other column": read the raw columns separately
         rec = loader(path, columns, check_units=check_units)
-        raw_rec = loader(path, ColumnMap(columns.columns, private), check_units=False)
+        raw_rec = loader(path, dataclasses.replace(columns, extras=private), check_units=False)
     else:
         both = dataclasses.replace(columns, extras={**columns.extras, **private})
         raw_rec = rec = loader(path, both, check_units=check_units)
@@ -89,9 +89,7 @@ def load_referenced(path, columns: ColumnMap | None, table, *, base_dir, where: 
     if spec["kind"] == "column":
         rec = load_recording(path, columns)
         return rec, describe_column_reference(columns or ColumnMap())
-    fmt = Path(path).suffix.lower()
-    from .._io import load_csv, load_npz
-
-    loader = load_npz if fmt == ".npz" else load_csv
-    rec, ref = load_with_reference(path, columns or ColumnMap(), spec, loader, base_dir=base_dir)
+    rec, ref = load_with_reference(
+        path, columns or ColumnMap(), spec, load_recording, base_dir=base_dir
+    )
     return rec, ref.description
