@@ -63,6 +63,14 @@ def test_readme_is_short_and_ci_runs_its_test_command():
     assert commands[1] in (REPO / ".ci" / "run").read_text().splitlines()
 
 
+def test_readme_command_table_lists_every_command():
+    from hdjax.cli import COMMANDS
+
+    section = README.read_text().split("## Commands", 1)[1].split("\n## ", 1)[0]
+    listed = re.findall(r"^\| `hdjax (\w+)", section, re.M)
+    assert sorted(listed) == sorted(COMMANDS)
+
+
 def test_readme_links_exist():
     for target in re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", README.read_text()):
         if not target.startswith(("http://", "https://")):

@@ -10,9 +10,11 @@ from .._errors import DataError
 
 
 def _open(path: Path):
+    import zipfile
+
     try:
         return np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as err:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
         raise DataError(f"{path}: not a readable .npz archive ({err})") from None
 
 

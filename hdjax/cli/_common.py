@@ -131,3 +131,24 @@ def experiment_inputs(exp) -> list:
 
     walk(exp.get("data", {}))
     return paths
+
+
+def read_column_map(path):
+    """The [`hdjax.ColumnMap`][] of a TOML file's `[data]` table (or of its top level):
+    `columns`, `extras` and the CSV text `encoding`; other keys of the table are ignored, so an
+    experiment config serves as a column map."""
+    from pathlib import Path
+
+    from .._errors import ConfigError
+    from .._io import TOML_HINT, ColumnMap, read_text
+    from ..config import parse_toml
+
+    cpath = Path(path)
+    if not cpath.exists():
+        raise ConfigError(f"{cpath}: no such column-map file")
+    doc = parse_toml(read_text(cpath, what="column-map file", hint=TOML_HINT), where=str(cpath))
+    table = doc.get("data", doc)
+    if not isinstance(table, dict):
+        raise ConfigError(f"{cpath}: [data] must be a table")
+    table = {k: v for k, v in table.items() if k in ("columns", "extras", "encoding")}
+    return ColumnMap.from_dict(table, where=f"{cpath} [data]")

@@ -32,17 +32,9 @@ def add_parser(sub) -> None:
 
 def read_column_map(path):
     """The [`hdjax.ColumnMap`][] of a TOML file's `[data]` table (or of its top level)."""
-    from .._errors import ConfigError
-    from .._io import ColumnMap
-    from ..config import parse_toml
+    from ._common import read_column_map as read
 
-    cpath = Path(path)
-    if not cpath.exists():
-        raise ConfigError(f"{cpath}: no such column-map file")
-    doc = parse_toml(cpath.read_text(), where=str(cpath))
-    table = doc.get("data", doc)
-    table = {k: v for k, v in table.items() if k in ("columns", "extras")}
-    return ColumnMap.from_dict(table, where=f"{cpath} [data]")
+    return read(path)
 
 
 def convert(src, dst, columns=None, *, chunk: int = 1 << 20, progress=None) -> int:

@@ -46,21 +46,29 @@ def add_parser(sub) -> None:
         help="replace an estimate written earlier by hdjax at --out (never an input or another "
         "file)",
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="estimate even when the angles look wrong for the model (degrees instead of "
+        "radians, or a motor/output angle ratio other than the model's); refused by default",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress lines on stderr")
 
 
 def command(args, parser) -> int:
     import io
+    import warnings
 
     import numpy as np
 
-    from .._errors import ConfigError, ModelMismatchError
-    from .._io import ColumnMap, atomic_write_bytes, load_recording
+    from .._errors import ConfigError, DataError, ModelMismatchError, UnitWarning
+    from .._io import atomic_write_bytes, load_recording
     from .._joint import load_joint
     from .._metrics import error_metrics
-    from ..config import check_compatible, load_model, parse_toml
+    from ..config import check_compatible, load_model
+    from ..config._saved_model import angle_ratio_mismatch
     from ..report import check_output_file
-    from ._common import Progress
+    from ._common import Progress, read_column_map
 
     progress = Progress(args.quiet)
     out = Path(args.out)
@@ -77,18 +85,26 @@ def command(args, parser) -> int:
             )
         model_path = model_path / "model.json"
     saved = load_model(model_path)
-    cmap = None
-    if args.columns:
-        cpath = Path(args.columns)
-        if not cpath.exists():
-            raise ConfigError(f"{cpath}: no such column-map file")
-        doc = parse_toml(cpath.read_text(), where=str(cpath))
-        table = doc.get("data", doc)
-        table = {k: v for k, v in table.items() if k in ("columns", "extras")}
-        cmap = ColumnMap.from_dict(table, where=f"{cpath} [data]")
+    cmap = read_column_map(args.columns) if args.columns else None
     joint = load_joint(args.joint) if args.joint else None
-    rec = load_recording(args.data, cmap)
-    check_compatible(saved, rec, joint)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UnitWarning)
+        rec = load_recording(args.data, cmap)
+    for w in caught:
+        if not issubclass(w.category, UnitWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        elif args.force:
+            progress.warn(f"{w.message} (--force: estimating anyway; the torques may be wrong)")
+        else:
+            raise DataError(
+                f"{w.message}; the estimate would be wrong, so none is written (pass "
+                "--force to estimate anyway)"
+            )
+    check_compatible(saved, rec, joint, check_angles=not args.force)
+    if args.force:
+        why = angle_ratio_mismatch(saved, rec)
+        if why:
+            progress.warn(f"{why} (--force: estimating anyway; the torques may be wrong)")
     progress(f"estimating {rec.n_samples} samples with the {args.method} of {model_path}")
     cols = {"t": np.asarray(rec.t)}
     if args.method == "network":

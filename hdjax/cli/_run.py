@@ -38,7 +38,7 @@ def add_parser(sub) -> None:
 
 
 def command(args, parser) -> int:
-    from ..config import load_experiment
+    from ..config import load_experiment, preflight
     from ..report import ResultDir
     from ._common import Progress, experiment_inputs, parse_overrides
 
@@ -49,6 +49,7 @@ def command(args, parser) -> int:
     if args.no_network:
         overrides["network.enabled"] = False
     exp = load_experiment(args.config, overrides)
+    preflight(exp, base_dir=exp.base_dir, where=str(args.config))
     out = Path(args.out) if args.out else Path("runs") / exp["experiment"]["name"]
     inputs = experiment_inputs(exp)
     with ResultDir(out, overwrite=args.overwrite, inputs=inputs, command="run") as rd:

@@ -111,12 +111,14 @@ def run_sweep(
 ):
     """Run a sweep into `out` (atomically, resumable); returns a text summary."""
     from .._errors import ConfigError
-    from ..config import apply_setting
+    from ..config import apply_setting, preflight
     from ..report import ResultDir
 
-    cfgs = [apply_setting(dict(exp), setting, v, where=f"sweep value {v!r}") for v in values]
+    cfgs = [apply_setting(dict(exp), setting, v, where="sweep member") for v in values]
     if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
         raise ConfigError(f"sweep values repeat: {values}")
+    for v, c in zip(values, cfgs):  # every member is checked before the first one runs
+        preflight(c, base_dir=exp.base_dir, where=f"sweep member {setting} = {v!r}")
     staging = out.parent / f"{out.name}.partial"
     from ._common import experiment_inputs
 

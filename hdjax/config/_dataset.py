@@ -105,6 +105,8 @@ def column_map(data: dict) -> ColumnMap:
     table = {"columns": data.get("columns") or {}}
     if data.get("extras"):
         table["extras"] = data["extras"]
+    if data.get("encoding") not in (None, "utf-8"):
+        table["encoding"] = data["encoding"]
     return ColumnMap.from_dict(table, where="[data]")
 
 
