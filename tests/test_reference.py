@@ -212,6 +212,35 @@ def test_rnea_of_a_planar_two_link_arm_matches_the_closed_form(tmp_path):
         truth = np.array([[m11, m12], [m12, m22]]) @ qdd + cor + grav
         got = urdf.rnea([q1, q2], qd, qdd)[0]
         np.testing.assert_allclose(got, truth, rtol=1e-10, atol=1e-10)
+    # the same model torque through the builder (model_torque = "rnea", zero wrench), joint 2
+    n = 40
+    q = rng.uniform(-np.pi, np.pi, (n, 2))
+    v, a = rng.normal(size=(n, 2)), rng.normal(size=(n, 2))
+    cols = {"q1": q[:, 0], "q2": q[:, 1], "v1": v[:, 0], "v2": v[:, 1]}
+    cols |= {"a1": a[:, 0], "a2": a[:, 1]}
+    cols |= {f"w{i}": rng.normal(size=n) * (i == 0) for i in range(6)}  # only Fx, never held
+    spec = check_reference(
+        "[data.reference]",
+        {
+            "kind": "wrench",
+            "joint": 2,
+            "urdf": str(path),
+            "frame": "sensor",
+            "angles": ["q1", "q2"],
+            "wrench": [f"w{i}" for i in range(6)],
+            "model_torque": "rnea",
+            "velocities": ["v1", "v2"],
+            "accelerations": ["a1", "a2"],
+            "gravity": [0.0, -g, 0.0],
+        },
+    )
+    ref = build_wrench_reference(spec, cols, np.arange(n) * 0.01, base_dir=tmp_path)
+    c2, s2, c12 = np.cos(q[:, 1]), np.sin(q[:, 1]), np.cos(q[:, 0] + q[:, 1])
+    m21, m22 = m2 * (lc2**2 + l1 * lc2 * c2) + i2, m2 * lc2**2 + i2
+    tau2 = m21 * a[:, 0] + m22 * a[:, 1] + m2 * l1 * lc2 * s2 * v[:, 0] ** 2 + m2 * lc2 * g * c12
+    np.testing.assert_allclose(ref.model, tau2, rtol=1e-10, atol=1e-10)
+    # Fx in the sensor (tip) frame: the tip x axis is along link 2, so J_2^T W = 0 for Fx
+    np.testing.assert_allclose(ref.external, 0.0, atol=1e-12)
 
 
 # ---------------------------------------------------------------------------------------------
