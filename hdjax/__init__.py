@@ -17,10 +17,14 @@ Sub-packages (imported on first access, so `import hdjax` stays light):
 - `hdjax.report`: metrics, figures and reports.
 """
 
-import importlib
-import importlib.metadata
+from ._signals import guard_startup as _guard_startup
 
-import jax
+_guard_startup()  # the `hdjax` command: a signal while JAX is imported exits at once (130/143)
+
+import importlib  # noqa: E402
+import importlib.metadata  # noqa: E402
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 

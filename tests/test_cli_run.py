@@ -3,7 +3,6 @@
 import json
 import subprocess
 import sys
-import types
 
 import numpy as np
 import pytest
@@ -51,6 +50,7 @@ def test_run_writes_a_complete_result(run_dir):
     cfg, out = run_dir
     names = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
     assert names == [
+        ".hdjax-result",
         "config.resolved.toml",
         "figures/error_rate.png",
         "figures/model_synthetic.png",
@@ -100,7 +100,7 @@ def test_existing_output_refused_unless_overwrite(run_dir, capsys):
     assert main(["run", str(cfg), "--out", str(out), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert err == (
-        f"hdjax: error: output directory {out} already exists; choose another --out or pass "
+        f"hdjax: error: {out}: a result folder already exists here; choose another --out or pass "
         "--overwrite to replace it"
     )
     assert (out / "metrics.json").read_text() == before
@@ -143,23 +143,15 @@ def test_help_explains_options_with_an_example(capsys):
     assert "discover" in capsys.readouterr().out
 
 
-def test_discover_is_dispatched_or_reported_missing(monkeypatch, capsys):
-    calls = []
-    fake = types.ModuleType("hdjax.discover")
-    fake.cli_main = lambda argv: calls.append(argv) or 0
-    monkeypatch.setitem(sys.modules, "hdjax.discover", fake)
-    assert main(["discover", "--train", "a.csv", "--out", "d"]) == 0
-    assert calls == [["--train", "a.csv", "--out", "d"]]
-
-    def exits(argv):
-        raise SystemExit(0 if argv == ["--help"] else 2)
-
-    fake.cli_main = exits
+def test_discover_shares_the_parser(capsys):
     assert main(["discover", "--help"]) == 0
-    assert main(["discover", "--bogus"]) == 2
-    monkeypatch.setitem(sys.modules, "hdjax.discover", types.ModuleType("hdjax.discover"))
-    assert main(["discover", "--train", "a.csv"]) == 2
-    assert "hdjax discover: not available" in capsys.readouterr().err
+    assert "--train" in capsys.readouterr().out
+    assert main(["discover", "--trian", "a.csv", "--out", "d"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (
+        "hdjax discover: unknown option '--trian' (did you mean '--train'?); see "
+        "'hdjax discover --help'"
+    )
 
 
 # -- estimate ---------------------------------------------------------------------------------

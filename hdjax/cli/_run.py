@@ -24,7 +24,12 @@ def add_parser(sub) -> None:
         help="result directory (default runs/NAME with NAME from [experiment] name); refused if "
         "it exists, unless --overwrite",
     )
-    p.add_argument("--overwrite", action="store_true", help="replace an existing result directory")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier hdjax result at --out (never any other folder, an input or the "
+        "current directory)",
+    )
     p.add_argument("--no-figures", action="store_true", help="skip the figures (faster)")
     p.add_argument("--no-network", action="store_true", help="skip the network method")
     from ._common import add_common
@@ -33,9 +38,9 @@ def add_parser(sub) -> None:
 
 
 def command(args, parser) -> int:
-    from ..config import load_experiment
+    from ..config import load_experiment, preflight
     from ..report import ResultDir
-    from ._common import Progress, parse_overrides
+    from ._common import Progress, experiment_inputs, parse_overrides
 
     progress = Progress(args.quiet)
     overrides = parse_overrides(args.set)
@@ -44,8 +49,10 @@ def command(args, parser) -> int:
     if args.no_network:
         overrides["network.enabled"] = False
     exp = load_experiment(args.config, overrides)
+    preflight(exp, base_dir=exp.base_dir, where=str(args.config))
     out = Path(args.out) if args.out else Path("runs") / exp["experiment"]["name"]
-    with ResultDir(out, overwrite=args.overwrite) as rd:
+    inputs = experiment_inputs(exp)
+    with ResultDir(out, overwrite=args.overwrite, inputs=inputs, command="run") as rd:
         summary = run_experiment(exp, rd, progress)
     progress(f"wrote {out}")
     print(summary)

@@ -39,4 +39,9 @@ from ._rls import (
 )
 from ._segments import merge_sparse_segments as merge_sparse_segments
 from ._signals import Signals as Signals, signals_from_recording as signals_from_recording
+from ._stream import NormalEquations as NormalEquations, StreamingQR as StreamingQR
+from ._stream_fit import (
+    RecordingStream as RecordingStream,
+    calibrate_stream as calibrate_stream,
+)
 from ._terms import term_from_dict as term_from_dict, term_to_dict as term_to_dict

@@ -205,9 +205,15 @@ def select_active(model: ComplianceModel, A: np.ndarray, torque: np.ndarray):
 
 
 def _select_active(model: ComplianceModel, nonzero: np.ndarray, torque: np.ndarray):
-    n_seg = model.n_segments
     seg = np.searchsorted(np.asarray(model.knots), torque, side="right")
-    counts = tuple(int(c) for c in np.bincount(seg, minlength=n_seg))
+    return select_active_counts(model, nonzero, np.bincount(seg, minlength=model.n_segments))
+
+
+def select_active_counts(model: ComplianceModel, nonzero: np.ndarray, counts):
+    """[`select_active`][] from which columns are non-zero and the samples per segment (what a
+    streaming fit accumulates); returns `(active, counts, dropped)`."""
+    n_seg = model.n_segments
+    counts = tuple(int(c) for c in counts)
     active = np.array(nonzero, dtype=bool)
     dropped = []
     names = model.term_names
@@ -314,9 +320,17 @@ def calibrate_lstsq(model: ComplianceModel, data, *, throw: bool = True) -> Cali
 
 def _qr_solve(model, sig, torque, active, messages, throw):
     """Scaled Householder QR on the dense design: rank, condition and (if full rank) solution."""
-    p = int(active.sum())
     A = _design(model, sig, torque)
     qtb, r, scale = _scaled_qr(A, sig.twist, jnp.asarray(active))
+    return solve_from_r(
+        model, np.asarray(r), np.asarray(qtb), np.asarray(scale), active, messages, throw
+    )
+
+
+def solve_from_r(model, r, qtb, scale, active, messages, throw):
+    """Rank, condition and solution from the factor `R` of the scaled design and `Q^T b` (the
+    rank decision and the collinear-terms message of [`calibrate_lstsq`][])."""
+    p = int(active.sum())
     r_np = np.asarray(r)[np.ix_(active, active)]
     s = np.linalg.svd(r_np, compute_uv=False)
     rank = int((s > RANK_RTOL * s[0]).sum())

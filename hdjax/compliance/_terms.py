@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 
 from .._errors import ConfigError
-from ..effects import AbstractTerm, term_type
+from ..effects import TORQUE_PATH as TORQUE_PATH, AbstractTerm, term_type
 
 # Entries older saved models wrote for every term (then dataclass fields, now class-level).
 _LEGACY_FIELDS = ("key", "torque_kind")

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import ConfigError
-from .._io import ColumnMap, load_csv, load_npz
+from .._io import ColumnMap, load_csv, load_npz, load_recording
 from .._joint import Joint
 from .._recording import Recording, make_recording
 from ._schema import joint_of
@@ -105,6 +105,8 @@ def column_map(data: dict) -> ColumnMap:
     table = {"columns": data.get("columns") or {}}
     if data.get("extras"):
         table["extras"] = data["extras"]
+    if data.get("encoding") not in (None, "utf-8"):
+        table["encoding"] = data["encoding"]
     return ColumnMap.from_dict(table, where="[data]")
 
 
@@ -115,7 +117,7 @@ def resolve_path(exp, name: str) -> Path:
 
 def _load(path: Path, fmt: str, cmap: ColumnMap, check_units: bool) -> Recording:
     if fmt == "auto":
-        fmt = "npz" if path.suffix.lower() == ".npz" else "csv"
+        return load_recording(path, cmap, check_units=check_units)
     loader = load_npz if fmt == "npz" else load_csv
     return loader(path, cmap, check_units=check_units)
 
@@ -256,8 +258,8 @@ def synthetic_recording(
     $T / (N K_t)$ plus a friction-like part and 1 % noise; the twist is the five-segment
     flexspline of eq. (7) (knots $\\pm\\tau_0/3, \\pm 2\\tau_0/3$) with the
     paper's k-shape scaled to $k_1 = 1/(6.7\cdot10^4)$ rad/N·m, plus a cubic polynomial in the
-    normalised current ([`SYNTHETIC_POLY`][]), a first-order kinematic error in the paper's form
-    (eq. (9), [`SYNTHETIC_FOURIER`][]) and white noise of `noise_arcsec`.
+    normalised current (`SYNTHETIC_POLY`), a first-order kinematic error in the paper's form
+    (eq. (9), `SYNTHETIC_FOURIER`) and white noise of `noise_arcsec`.
     """
     rng = np.random.default_rng(seed)
     tau0, n_ratio = joint.rated_torque, joint.ratio

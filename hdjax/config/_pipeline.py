@@ -46,10 +46,19 @@ PAPER_ERRORS = {
 def current_scale(cfg: dict, train: list[Recording]) -> float:
     """The `[model] current_scale`, with `"auto"` = the largest |current| in the training data."""
     value = cfg["model"]["current_scale"]
-    if value != "auto":
-        return float(value)
     peak = max(float(np.max(np.abs(np.asarray(r.current)))) for r in train)
-    return peak if peak > 0 else 1.0
+    if value == "auto":
+        return peak if peak > 0 else 1.0
+    value = float(value)
+    # The polynomial columns are powers of current / scale: a scale far from the data's range
+    # overflows them or makes them vanish, and the fit fails deep inside the solver.
+    if peak > 0 and not 1e-3 <= peak / value <= 1e3:
+        raise ConfigError(
+            f"[model] current_scale = {value:g} A is far from the data's largest |current| "
+            f"({peak:.4g} A): the normalised current would reach {peak / value:.3g}; set "
+            f'current_scale near {peak:.4g} or to "auto"'
+        )
+    return value
 
 
 def build_model(cfg: dict, joint: Joint, scale: float):
@@ -103,8 +112,8 @@ def calibrate(cfg: dict, model, train: list[Recording], warn=None):
     """
     from ..compliance import calibrate_lstsq, calibrate_rls
 
-    data = stacked_signals(model, train)
     fit = cfg["fit"]
+    data = None if fit.get("chunk") and fit["method"] == "lstsq" else stacked_signals(model, train)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if fit["method"] == "rls":
@@ -115,6 +124,11 @@ def calibrate(cfg: dict, model, train: list[Recording], warn=None):
                 forgetting=fit["forgetting"],
                 init_samples=fit["init_samples"] or None,
             )
+        elif data is None:
+            from ..compliance import RecordingStream, calibrate_stream
+
+            stream = RecordingStream.from_recordings(train, fit["chunk"])
+            result = calibrate_stream(model, stream, chunk=fit["chunk"], throw=False)
         else:
             result = calibrate_lstsq(model, data, throw=False)
     for w in caught:

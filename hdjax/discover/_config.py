@@ -30,7 +30,7 @@ from .._errors import ConfigError
 from .._io import ColumnMap, did_you_mean, load_recording, read_toml
 from .._joint import Joint
 
-_DATA_KEYS = ("path", "train", "test", "test_blocks", "columns", "extras")
+_DATA_KEYS = ("path", "train", "test", "test_blocks", "columns", "extras", "encoding")
 _DISCOVER_KEYS = (
     "max_effects",
     "min_gain",
@@ -61,9 +61,10 @@ def load_discover_config(path):
         if key not in _DATA_KEYS:
             raise ConfigError(f"{path} [data]: unknown key {key!r}{did_you_mean(key, _DATA_KEYS)}")
     colmap = None
-    if "columns" in data or "extras" in data:
+    if "columns" in data or "extras" in data or "encoding" in data:
         colmap = ColumnMap.from_dict(
-            {k: data[k] for k in ("columns", "extras") if k in data}, where=f"{path} [data]"
+            {k: data[k] for k in ("columns", "extras", "encoding") if k in data},
+            where=f"{path} [data]",
         )
     here = path.parent
     notes = []
