@@ -197,6 +197,7 @@ def _describe_check(check) -> str:
         "table": "table",
         "current_scale": '"auto" or a number > 0',
         "test_files": "list of files, or a table name = file",
+        "check_reference": 'table: kind = "column" (default) or "wrench" (see hdjax.reference)',
     }
     if outer in simple:
         return simple[outer]
