@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import hdjax
+from hdjax._trig import sincos
 from hdjax.compliance import (
     ColumnTimesTorque,
     ComplianceModel,
@@ -12,8 +13,10 @@ from hdjax.compliance import (
     Harmonics,
     Stiffening,
     paper_knots,
+    term_from_dict,
+    term_to_dict,
 )
-from hdjax.compliance._terms import harmonic_pairs, sincos, term_from_dict, term_to_dict
+from hdjax.effects import harmonic_pairs
 from tests.helpers import JOINT, make_signals, numpy_design, simulate
 
 

@@ -39,6 +39,7 @@ from ._lstsq import (
 from ._model import ComplianceModel
 from ._signals import signals_from_recording
 from ._stream import NormalEquations, StreamingQR, scaled_cholesky
+from ._stream_fast import fast_path_supported, gram_step, refine_step
 from ._terms import TORQUE_PATH
 
 SMOOTH_HALF_WINDOW = 5
@@ -260,6 +261,19 @@ def _passes(model, stream, chunk):
         yield _chunk_design(model, win, lo, hi, paths)
 
 
+def _fast_pass(model, stream, chunk, step):
+    """Run a fused step ([`hdjax.compliance._stream_fast`][]) on every window, the Dahl
+    states carried; yields its outputs (as NumPy) without the carried state."""
+    n_paths = sum(t.torque_kind == "path" for t in model.effect_terms)
+    z = jnp.asarray(np.tile([0.0, np.nan], (max(n_paths, 1), 1)))  # (state, last driver)
+    length = chunk + 1
+    for win, lo, hi in windows(stream, 1, 0, length):
+        w = np.zeros(length)
+        w[lo:hi] = 1.0
+        *out, z = step(model, win, jnp.asarray(w), z)
+        yield tuple(np.asarray(o) for o in out)
+
+
 # ---------------------------------------------------------------------------------------------
 
 
@@ -281,17 +295,28 @@ def calibrate_stream(
     """
     _check_chunk(chunk)
     n_seg, p = model.n_segments, model.n_coef
+    fast = fast_path_supported(model)
     ne = NormalEquations(p)
     counts = np.zeros(n_seg, dtype=np.int64)
     t_lo, t_hi = np.full(n_seg, np.inf), np.full(n_seg, -np.inf)
     # -- pass 1: Gram matrix, segment counts and torque ranges ------------------------------
-    for x, b, tq, seg in _passes(model, stream, chunk):
-        for idx, rows in _blocks(model, x, seg):
-            ne.add(x[:, rows], b[rows], idx)
-        ne.add_rhs(b)
-        counts += np.bincount(seg, minlength=n_seg)
-        np.minimum.at(t_lo, seg, tq)
-        np.maximum.at(t_hi, seg, tq)
+    if fast:
+        for g_c, atb_c, btb_c, cnt, lo, hi in _fast_pass(model, stream, chunk, gram_step):
+            ne.g[0] += g_c
+            ne.atb[0] += atb_c
+            ne.btb[0] += btb_c
+            ne.n[0] += int(cnt.sum())
+            counts += cnt.astype(np.int64)
+            t_lo, t_hi = np.minimum(t_lo, lo), np.maximum(t_hi, hi)
+    else:
+        for x, b, tq, seg in _passes(model, stream, chunk):
+            for idx, rows in _blocks(model, x, seg):
+                ne.add(x[:, rows], b[rows], idx)
+            ne.add_rhs(b)
+            counts += np.bincount(seg, minlength=n_seg)
+            for s_ in np.unique(seg):
+                sel = tq[seg == s_]
+                t_lo[s_], t_hi[s_] = min(t_lo[s_], sel.min()), max(t_hi[s_], sel.max())
     g, atb, btb, n = ne.total()
     if n == 0:
         raise DataError(f"{stream.label}: the stream holds no samples")
@@ -303,12 +328,16 @@ def calibrate_stream(
             f"samples (better {10 * n_act}) or reduce the model (fewer segments, lower orders)"
         )
     messages = [f"left out: {d}" for d in dropped]
-    fast = scaled_cholesky(g, atb, active, CSNE_MAX_COND)
+    csne = scaled_cholesky(g, atb, active, CSNE_MAX_COND)
     # -- pass 2: refinement with the true residual, or the QR factor ------------------------
-    if fast is not None:
-        coef, cond, solve = fast
+    if csne is not None:
+        coef, cond, solve = csne
         atr, rss0 = np.zeros(p), 0.0
-        for x, b, _, seg in _passes(model, stream, chunk):
+        refine = lambda *a: refine_step(*a, jnp.asarray(coef))
+        for atr_c, rss_c in _fast_pass(model, stream, chunk, refine) if fast else ():
+            atr += atr_c
+            rss0 += float(rss_c)
+        for x, b, _, seg in () if fast else _passes(model, stream, chunk):
             r = np.array(b, copy=True)
             blocks = _blocks(model, x, seg)
             for idx, rows in blocks:
