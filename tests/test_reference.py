@@ -466,3 +466,21 @@ def test_reference_in_an_experiment_file(tmp_path):
         resolve({**base, "data": {**files, "columns": {"torque": "x"}, "reference": _OK}})
     with pytest.raises(hdjax.ConfigError, match='kind = "column" takes no other keys'):
         resolve({**base, "data": {**files, "reference": {"kind": "column", "joint": 3}}})
+
+
+def test_a_column_reference_is_named_in_the_dataset(tmp_path):
+    from hdjax import save_csv
+    from hdjax.config import build_dataset, experiment_from_dict, synthetic_recording
+
+    joint = {"ratio": 100, "rated_torque": 50}
+    rec = synthetic_recording(hdjax.Joint(**joint), 200, seed=0)
+    save_csv(rec, tmp_path / "log.csv")
+    # a synthetic log at 1 kHz moves fast; the units check would take it for degrees
+    files = {"kind": "files", "train": ["log.csv"], "split": 0.3, "check_units": False}
+    exp = experiment_from_dict({"joint": joint, "data": files}, base_dir=tmp_path)
+    ds = build_dataset(exp)
+    assert ds.reference == {
+        "kind": "column",
+        "description": "reference: the log column 'torque' ([data.columns] torque)",
+    }
+    assert ds.provenance[-1] == ds.reference["description"]

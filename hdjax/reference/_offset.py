@@ -39,7 +39,9 @@ class SensorOffset:
     **Fields:** `method` (`"none"`, `"rest"` or `"fit"`), `wrench` (the offset $w_0$, shape
     `(6,)`, N and N·m), `n_samples` (readings used); for `"fit"` also `mass` [kg], `com` [m],
     `residual_rms` (per channel, of the fitted model) and `stderr` (standard errors of the
-    offset from the residual variance, $\hat\sigma^2 (A^\top A)^{-1}$); `window` for `"rest"`.
+    offset, from the residual variance of each channel, assuming independent residuals: with
+    structured residuals (unmodelled dynamics) the real uncertainty is larger); `window` for
+    `"rest"`.
     """
 
     method: str
@@ -152,11 +154,15 @@ def fit_offset_with_payload(wrench, rotations, gravity=(0.0, 0.0, -9.80665)) -> 
         )
     x = x / scale
     resid = (b - a @ x).reshape(n, 6)
-    # standard errors from one pooled residual variance (channels in N and N·m alike)
-    sigma2 = float(np.sum(resid**2)) / max(1, 6 * n - 10)
+    # standard errors with one residual variance per channel (forces in N, moments in N·m):
+    # cov = (A^T A)^-1 A^T S A (A^T A)^-1, S = diag of the channel variances, via QR of A
+    sigma2 = np.sum(resid**2, axis=0) / max(1, n - 10 / 6)
     _, r = np.linalg.qr(a / scale)
     r_inv = np.linalg.inv(r)
-    stderr = np.sqrt(sigma2 * np.sum(r_inv**2, axis=1)) / scale
+    weighted = (a / scale) * np.sqrt(np.tile(sigma2, n))[:, None]
+    middle = r_inv.T @ (weighted.T @ weighted) @ r_inv
+    cov = r_inv @ middle @ r_inv.T
+    stderr = np.sqrt(np.diag(cov)) / scale
     mass = float(x[6])
     com = x[7:10] / mass if abs(mass) > 1e-9 else np.full(3, np.nan)
     return SensorOffset(
