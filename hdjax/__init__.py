@@ -14,6 +14,7 @@ Sub-packages (imported on first access, so `import hdjax` stays light):
 - `hdjax.fit`: joint gradient fitting of compliance, network and plant.
 - `hdjax.discover`: the residual loop (find, trace, add, refit, report).
 - `hdjax.strain`: Hashimoto et al. (1993) strain-gauge sensing and joint torque control.
+- `hdjax.reference`: joint-torque references from a force/torque sensor and the arm's Jacobian.
 - `hdjax.report`: metrics, figures and reports.
 """
 
@@ -61,7 +62,17 @@ try:
 except importlib.metadata.PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0+unknown"
 
-_SUBPACKAGES = ("compliance", "plant", "network", "fit", "discover", "strain", "report", "config")
+_SUBPACKAGES = (
+    "compliance",
+    "plant",
+    "network",
+    "fit",
+    "discover",
+    "strain",
+    "reference",
+    "report",
+    "config",
+)
 
 
 def __getattr__(name: str):

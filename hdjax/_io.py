@@ -395,6 +395,12 @@ def _umask() -> int:
     return mask
 
 
+def file_mode() -> int:
+    """The mode a new file gets from a plain `open` under this process's umask (0644 under the
+    usual 022): give it to a file created by `tempfile.mkstemp` (0600) before renaming it."""
+    return 0o666 & ~_umask()
+
+
 def atomic_write_bytes(path, data: bytes) -> None:
     """Write `data` to `path` through a temporary file and a rename (never half-written); the
     file gets the mode a plain `open` would give it (0644 under the usual umask 022)."""
@@ -404,7 +410,7 @@ def atomic_write_bytes(path, data: bytes) -> None:
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; results follow the umask
+        os.chmod(tmp, file_mode())  # mkstemp makes 0600; results follow the umask
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

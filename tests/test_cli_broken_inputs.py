@@ -860,6 +860,74 @@ def _ratio_csv(root: Path):
 
 
 CASES = [c if c[0] != "estimate-ratio" else (*c[:2], _ratio_csv, *c[3:]) for c in CASES]
+CASES += [
+    # -- the other commands: convert, fleet, bench ---------------------------------------------
+    (
+        "convert-out-is-input",
+        ["convert", "proj/data.csv", "proj/data.csv", "--overwrite"],
+        _nothing,
+        2,
+        None,
+        ["is also an input"],
+    ),
+    (
+        "convert-out-holds-input",
+        ["convert", "proj/data.csv", "proj", "--overwrite"],
+        _nothing,
+        2,
+        None,
+        ["holds the input"],
+    ),
+    (
+        "convert-out-foreign-file",
+        ["convert", "proj/data.csv", "proj/sub/x.parquet", "--overwrite"],
+        _set("proj/sub/x.parquet", "mine\n"),
+        2,
+        None,
+        ["not a file hdjax wrote"],
+    ),
+    (
+        "convert-csv-latin1",
+        ["convert", "proj/data.csv", "d.parquet"],
+        _edit("proj/data.csv", _with_extra_latin1),
+        2,
+        None,
+        ["data.csv", "UTF-8"],
+    ),
+    (
+        "convert-columns-latin1",
+        ["convert", "proj/data.csv", "d.parquet", "--columns", "proj/columns.toml"],
+        _set("proj/columns.toml", _latin1(f"# {LATIN1}\n" + COLUMNS)),
+        2,
+        None,
+        ["byte position"],
+    ),
+    (
+        "fleet-manifest-missing",
+        ["fleet", "proj/nope.toml", "--out", "f"],
+        _nothing,
+        2,
+        None,
+        ["no such"],
+    ),
+    (
+        "fleet-out-holds-manifest",
+        ["fleet", "proj/cfg.toml", "--out", "proj", "--overwrite"],
+        _nothing,
+        2,
+        None,
+        [],
+    ),
+    (
+        "bench-samples-huge",
+        ["bench", "--samples", "100000000000000", "-q"],
+        _nothing,
+        2,
+        None,
+        ["of memory"],
+    ),
+    ("bench-samples-few", ["bench", "--samples", "10", "-q"], _nothing, 2, None, ["--samples"]),
+]
 CASES.append(
     (
         "estimate-degrees-force",

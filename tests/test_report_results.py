@@ -30,19 +30,37 @@ def test_no_knee_without_a_bend():
 
 
 def test_figures_are_png():
+    from .helpers import assert_figure, png_image
+
     t = np.linspace(0, 1, 5000)
     meas = 100 * np.sin(6 * t)
     est = meas + np.where(np.arange(5000) == 1234, 50.0, 0.1)
-    assert torque_figure(t, meas, est, title="x", rated=400.0).startswith(PNG)
+    png = torque_figure(t, meas, est, title="x", rated=400.0)
+    assert png.startswith(PNG)
+    assert_figure(png, (825, 528))  # 7.5 x 4.8 in at 110 dpi
     m = {"slow": {"max_pct": 5.0, "rms_pct": 1.0}, "fast": {"max_pct": 9.0, "rms_pct": 2.0}}
     paper = {"model": {"slow": (84.8, 42.3), "fast": (400.0, 67.06)}}
-    assert error_rate_figure({"model": m, "network": None}, paper=paper, rated=400.0).startswith(
-        PNG
-    )
+    png = error_rate_figure({"model": m, "network": None}, paper=paper, rated=400.0)
+    assert_figure(png, (825, 462))
     png = sweep_figure(
         [1, 2, 3], [3.0, 1.0, 0.9], [0.1, 0.2, 0.3], setting="s", knee=1, metric="RMS"
     )
-    assert png.startswith(PNG)
+    assert_figure(png, (770, 440))
+    # and the check itself refuses a blank canvas of the right size
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(7.0, 4.0))
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    assert png_image(buf.getvalue()).shape[:2] == (440, 770)
+    with pytest.raises(AssertionError, match="pixels are drawn|colours"):
+        assert_figure(buf.getvalue(), (770, 440))
 
 
 def test_result_dir_commits_only_when_complete(tmp_path):

@@ -191,20 +191,21 @@ def _describe_check(check) -> str:
         inner = _describe_check(free["item"])
         return f"{'non-empty ' if free.get('nonempty') else ''}list of {inner}"
     simple = {
+        "encoding": 'a text encoding name ("utf-8", "latin-1", "cp1252", ...)',
         "bool": "true or false",
         "str": "string",
         "table": "table",
         "current_scale": '"auto" or a number > 0',
         "test_files": "list of files, or a table name = file",
+        "check_reference": 'table: kind = "column" (default) or "wrench" (see hdjax.reference)',
     }
     if outer in simple:
         return simple[outer]
     if name.startswith("_list.") or name == "<lambda>":
         return "any value"
-    raise DocsError(
-        f"docs/_gen/reference.py cannot describe the schema check {name!r}: add it to "
-        "_describe_check"
-    )
+    # a check of its own: its docstring's first sentence, if any (the meaning is what matters)
+    doc = inspect.getdoc(check) or ""
+    return doc.split(". ")[0].split("\n\n")[0].replace("\n", " ") if doc else "checked value"
 
 
 def _argument_docs(docstring: str) -> dict[str, str]:

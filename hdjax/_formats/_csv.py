@@ -25,10 +25,25 @@ def _header(path: Path, fh) -> list[str]:
     return header
 
 
+def _open(path: Path):
+    # UTF-8 with or without a byte-order mark; a bad byte is reported by the callers
+    return path.open(newline="", encoding="utf-8-sig")
+
+
+def _not_utf8(path: Path, line: int) -> DataError:
+    return DataError(
+        f"{path}: not valid UTF-8 text near line {line}; save the file as UTF-8 (or read it "
+        "whole, through a column map with an encoding setting)"
+    )
+
+
 def column_names(path) -> list[str]:
     path = Path(path)
-    with path.open(newline="") as fh:
-        return _header(path, fh)
+    try:
+        with _open(path) as fh:
+            return _header(path, fh)
+    except UnicodeDecodeError:
+        raise _not_utf8(path, 1) from None
 
 
 def read_table(path, names=None) -> dict[str, np.ndarray]:
@@ -65,13 +80,19 @@ def _parse(path: Path, header: list[str], rows: list[list[str]], first_line: int
 def iter_tables(path, chunk: int, names=None):
     """Consecutive tables of at most `chunk` rows; memory is bounded by the chunk."""
     path = Path(path)
-    with path.open(newline="") as fh:
-        header = _header(path, fh)
+    with _open(path) as fh:
+        try:
+            header = _header(path, fh)
+        except UnicodeDecodeError:
+            raise _not_utf8(path, 1) from None
         keep = [header.index(n) for n in (header if names is None else names)]
         reader = csv.reader(fh)
         line = 2
         while True:
-            block = list(itertools.islice(reader, chunk))
+            try:
+                block = list(itertools.islice(reader, chunk))
+            except UnicodeDecodeError:
+                raise _not_utf8(path, line) from None
             if not block:
                 return
             n_lines = len(block)

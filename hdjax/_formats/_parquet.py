@@ -85,6 +85,9 @@ class ParquetWriter:
 
     def close(self) -> None:
         self.writer.close()
+        from .._io import file_mode
+
+        os.chmod(self.tmp, file_mode())  # mkstemp makes 0600; results follow the umask
         os.replace(self.tmp, self.path)
 
     def abort(self) -> None:

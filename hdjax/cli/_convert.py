@@ -80,14 +80,29 @@ def convert(src, dst, columns=None, *, chunk: int = 1 << 20, progress=None) -> i
     return writer.n_rows
 
 
+def _is_parquet(path: Path) -> bool:
+    """Only a Parquet file is replaced under --overwrite (never a log or another file)."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(4) == b"PAR1"
+    except OSError:
+        return False
+
+
 def command(args, parser) -> int:
-    from .._errors import ConfigError
+    from ..report import check_output_file
     from ._common import Progress
 
     progress = Progress(args.quiet)
     out = Path(args.output)
-    if out.exists() and not args.overwrite:
-        raise ConfigError(f"output file {out} already exists; pass --overwrite to replace it")
+    check_output_file(
+        out,
+        inputs=[args.input, args.columns],
+        overwrite=args.overwrite,
+        flag="OUTPUT",
+        ours=_is_parquet,
+        example="log.parquet",
+    )
     cmap = read_column_map(args.columns) if args.columns else None
     n = convert(args.input, out, cmap, chunk=args.chunk, progress=progress)
     progress(f"wrote {out} ({n} rows)")

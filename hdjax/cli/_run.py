@@ -79,7 +79,7 @@ def run_experiment(exp, rd, progress) -> str:
     metrics: dict = {
         "experiment": cfg["experiment"]["name"],
         "environment": environment(seed),
-        "data": {"provenance": ds.provenance, "n_train": ds.n_train},
+        "data": {"provenance": ds.provenance, "n_train": ds.n_train, "reference": ds.reference},
     }
 
     # -- the model-based method --------------------------------------------------------------

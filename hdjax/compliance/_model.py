@@ -24,8 +24,9 @@ import numpy as np
 from .._custom_types import Array, Float
 from .._errors import ConfigError
 from .._joint import Joint
+from ..effects import AbstractTerm, Constant, CurrentPolynomial, Harmonics, PaperFourier
 from ._signals import VELOCITY_METHODS, Signals
-from ._terms import TORQUE_KINDS, Constant, CurrentPolynomial, Harmonics, PaperFourier
+from ._terms import term_from_dict, term_to_dict
 
 KINEMATIC_FORMS = ("paper", "harmonic", "none")
 _PAPER_K_NAMES = ("k3", "k2", "k1", "k4", "k5")
@@ -97,8 +98,11 @@ class ComplianceModel(eqx.Module):
         if self.velocity not in VELOCITY_METHODS:
             raise ConfigError(f"velocity must be one of {VELOCITY_METHODS}")
         for term in self.base_terms + self.effect_terms:
-            if term.torque_kind not in TORQUE_KINDS:
-                raise ConfigError(f"term {term!r} has unknown torque_kind {term.torque_kind!r}")
+            if not isinstance(term, AbstractTerm):
+                raise ConfigError(
+                    f"term {term!r} is not an hdjax.effects.AbstractTerm; define term groups "
+                    "with their family in hdjax.effects"
+                )
         if len(self.active) != self.n_coef:
             raise ConfigError(f"active has {len(self.active)} entries for {self.n_coef} terms")
         if isinstance(self.coef, np.ndarray | jnp.ndarray) and self.coef.shape != (self.n_coef,):
@@ -337,8 +341,6 @@ class ComplianceModel(eqx.Module):
 
     def to_dict(self) -> dict:
         """A JSON-ready description (structure and coefficients)."""
-        from ._terms import term_to_dict
-
         return {
             "ratio": self.ratio,
             "rated_torque": self.rated_torque,
@@ -357,8 +359,6 @@ class ComplianceModel(eqx.Module):
     @classmethod
     def from_dict(cls, d: dict) -> ComplianceModel:
         """Inverse of `to_dict`."""
-        from ._terms import term_from_dict
-
         return cls(
             coef=jnp.asarray(d["coef"], jnp.float64),
             ratio=float(d["ratio"]),

@@ -36,13 +36,16 @@ class Dataset:
     """Calibration and test recordings of one experiment.
 
     **Fields:** `train` (recordings to calibrate / train on), `test` (name -> recording to
-    score on), `joint` (the [`hdjax.Joint`][]) and `provenance` (one line per recording).
+    score on), `joint` (the [`hdjax.Joint`][]), `provenance` (one line per recording) and
+    `reference` (which reference torque was used: `kind`, `description`, and for a wrench
+    reference its holds and sensor offset per file).
     """
 
     train: list[Recording]
     test: dict[str, Recording]
     joint: Joint
     provenance: list[str]
+    reference: dict = dataclasses.field(default_factory=lambda: {"kind": "column"})
 
     @property
     def n_train(self) -> int:
@@ -71,6 +74,14 @@ def build_dataset(exp, progress=None) -> Dataset:
         ds = _from_plant(exp, joint, say)
     if data["settle"] > 0:
         ds = _drop_settling(ds, data["settle"])
+    if data["reference"]["kind"] == "column":
+        from ..reference import describe_column_reference
+
+        ds.reference = {
+            "kind": "column",
+            "description": describe_column_reference(data["columns"], data["kind"]),
+        }
+        ds.provenance.append(ds.reference["description"])
     return ds
 
 
@@ -93,6 +104,7 @@ def _drop_settling(ds: Dataset, settle: float) -> Dataset:
         test={k: cut(r) for k, r in ds.test.items()},
         joint=ds.joint,
         provenance=ds.provenance + [note],
+        reference=ds.reference,
     )
 
 
@@ -115,22 +127,32 @@ def resolve_path(exp, name: str) -> Path:
     return p if p.is_absolute() else (exp.base_dir / p)
 
 
-def _load(path: Path, fmt: str, cmap: ColumnMap, check_units: bool) -> Recording:
+def _load(path: Path, fmt: str, cmap: ColumnMap, check_units: bool, exp) -> tuple:
+    """The recording at `path` and, for a wrench reference, its report (else `None`)."""
     if fmt == "auto":
-        return load_recording(path, cmap, check_units=check_units)
-    loader = load_npz if fmt == "npz" else load_csv
-    return loader(path, cmap, check_units=check_units)
+        loader = load_recording
+    else:
+        loader = load_npz if fmt == "npz" else load_csv
+    spec = exp["data"]["reference"]
+    if spec["kind"] != "wrench":
+        return loader(path, cmap, check_units=check_units), None
+    from ..reference import load_with_reference
+
+    rec, ref = load_with_reference(
+        path, cmap, spec, loader, base_dir=exp.base_dir, check_units=check_units
+    )
+    return rec, ref.as_dict()
 
 
 def _from_files(exp, joint: Joint, say) -> Dataset:
     data = exp["data"]
     cmap = column_map(data)
-    train, test, prov = [], {}, []
+    train, test, prov, refs = [], {}, [], {}
     split = data["split"]
     for name in data["train"]:
         path = resolve_path(exp, name)
         say(f"loading {path}")
-        rec = _load(path, data["format"], cmap, data["check_units"])
+        rec, refs[str(path)] = _load(path, data["format"], cmap, data["check_units"], exp)
         if split > 0 and not data["test"]:
             a, b = _split(rec, split, data["split_blocks"])
             train.append(a)
@@ -144,7 +166,7 @@ def _from_files(exp, joint: Joint, say) -> Dataset:
     for label, name in items:
         path = resolve_path(exp, name)
         say(f"loading {path}")
-        rec = _load(path, data["format"], cmap, data["check_units"])
+        rec, refs[str(path)] = _load(path, data["format"], cmap, data["check_units"], exp)
         test[_unique(label, test)] = rec
         prov.append(f"{path}: {rec.n_samples} test samples ({label})")
     for rec in train:
@@ -153,6 +175,11 @@ def _from_files(exp, joint: Joint, say) -> Dataset:
                 f"{rec.source}: a calibration recording needs a reference torque column; map "
                 "one in [data.columns] torque = ..."
             )
+    if data["reference"]["kind"] == "wrench":
+        first = next(iter(refs.values()))
+        prov += [f"{p}: {r['description']}" for p, r in refs.items()]
+        reference = {"kind": "wrench", "description": first["description"], "files": refs}
+        return Dataset(train=train, test=test, joint=joint, provenance=prov, reference=reference)
     return Dataset(train=train, test=test, joint=joint, provenance=prov)
 
 

@@ -56,7 +56,7 @@ def check_memory(n_bytes: float, what: str, fix: str, *, free: int | None = None
     - `n_bytes`: the estimated size.
     - `what`: what needs it ("[data] n_samples = 2000000000").
     - `fix`: what to do instead.
-    - `free`: the free memory in bytes (default [`available_memory`][]).
+    - `free`: the free memory in bytes (default `available_memory`).
     """
     free = available_memory() if free is None else free
     if free is not None and n_bytes > free:

@@ -16,6 +16,7 @@ from collections.abc import Callable, Mapping
 from .._errors import ConfigError
 from .._io import did_you_mean
 from .._joint import Joint
+from ..reference._spec import check_reference
 
 Check = Callable[[str, object], object]
 
@@ -148,6 +149,8 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "columns": ({}, _table),
         "extras": ({}, _table),
         "check_units": (True, _bool),
+        # the reference torque: a column (default) or built from a wrench ([data.reference])
+        "reference": ({"kind": "column"}, check_reference),
         "encoding": ("utf-8", _encoding),
         # synthetic (generated from the compliance model itself; no plant needed)
         "n_samples": (20000, _int(100)),
@@ -288,6 +291,17 @@ def _cross_checks(cfg: dict, where: str) -> None:
             raise ConfigError(
                 f"{where} [data]: give test files (test = [...]) or a split fraction (e.g. "
                 "split = 0.3 keeps the last 30% of each train file for testing)"
+            )
+    if data["reference"]["kind"] == "wrench":
+        if data["kind"] != "files":
+            raise ConfigError(
+                f'{where} [data.reference]: kind = "wrench" needs [data] kind = "files" (a log '
+                "with the wrench and joint-angle columns)"
+            )
+        if "torque" in data["columns"]:
+            raise ConfigError(
+                f'{where} [data.reference]: kind = "wrench" builds the reference torque; remove '
+                "torque from [data.columns]"
             )
     if cfg["fit"]["chunk"] and cfg["fit"]["method"] != "lstsq":
         raise ConfigError(

@@ -144,6 +144,7 @@ def _run_into(rd, args: argparse.Namespace) -> int:
             joint = hdjax.load_joint(args.joint)
             train = hdjax.load_csv(args.train)
             test = hdjax.load_csv(args.test)
+            cfg_notes = ["reference: the 'torque' column of the --train and --test files"]
     say = (lambda s: None) if args.quiet else (lambda s: print(f"[discover] {s}", file=sys.stderr))
     for w in caught:
         say(f"warning: {w.message}")

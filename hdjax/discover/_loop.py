@@ -38,7 +38,7 @@ from ..compliance import (
     merge_sparse_segments,
 )
 from ..compliance._lstsq import _design, prepare
-from ..compliance._terms import TORQUE_PATH
+from ..effects import TORQUE_PATH
 from ._library import LibraryOptions, build_library, candidate_columns
 from ._select import cv_gains, fold_basis, sindy_select
 from ._spectrum import OrderSpectrum, order_spectrum
@@ -55,7 +55,7 @@ class DiscoverOptions:
     n_folds: int = 5
     block: int = 200
     sindy_threshold: float = 0.02
-    library: LibraryOptions = LibraryOptions()
+    library: LibraryOptions = dataclasses.field(default_factory=LibraryOptions)
     n_segments: int = 5
     poly_order: int = 6
     fourier_order: int = 3

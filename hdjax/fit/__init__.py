@@ -1,4 +1,4 @@
-"""Joint gradient fitting of compliance model, network and plant parameters (issue 4)."""
+"""Joint gradient fitting of compliance model, network and plant parameters."""
 
 from ._compare import (
     METHOD_NAMES as METHOD_NAMES,

@@ -1,4 +1,4 @@
-r"""Comparison of calibration methods over the plant's four scenarios (issue 4, item 4).
+r"""Comparison of calibration methods over the plant's four scenarios.
 
 Every method is fitted on one recording of each of the four Song et al. experiments (Section
 IV.B; [`hdjax.plant.simulate_scenario`][], key `train_key`) taken together, and evaluated on a

@@ -1,4 +1,4 @@
-r"""How much the periodic angle features help (issue 4, item 2), measured on plant data.
+r"""How much the periodic angle features help, measured on plant data.
 
 [`hdjax.network.build_features`][] can feed the angles as $\sin(k\theta)$, $\cos(k\theta)$
 instead of unwrapped radians. What they are meant to carry is the kinematic error of Song et al.
