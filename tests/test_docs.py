@@ -39,6 +39,8 @@ def test_strict_build_renders_every_page(site):
     assert "hdjax run" in commands and "--overwrite" in commands
     api = (site / "reference" / "api" / "hdjax.compliance" / "index.html").read_text()
     assert 'id="hdjax.compliance.calibrate_lstsq"' in api
+    loop = (site / "residual-loop" / "index.html").read_text()
+    assert "generated: effect families" not in loop and "<code>hysteresis:torque</code>" in loop
     for page in site.rglob("*.html"):  # the rendered docstrings too
         text = re.sub(r"<[^>]+>", " ", page.read_text())
         assert not re.search(r"\b[Ii]ssues? #?\d+", text), page

@@ -2,6 +2,7 @@
 
 - The command, experiment-file and API reference pages are generated from the code on every
   build (`reference.py`), so they cannot drift from it; they are never committed.
+- The table of effect families replaces its marker in a page (`reference.FAMILIES_MARKER`).
 - Navigation entries whose page does not exist are dropped (with a note in the build log), and
   every page under docs/ that the navigation does not list is appended under "More", so a page
   added to docs/ is always reachable.
@@ -97,6 +98,12 @@ def on_config(config):
         nav.append({"More": extra})
     config["nav"] = nav
     return config
+
+
+def on_page_markdown(markdown, page, config, files):
+    if reference.FAMILIES_MARKER in markdown:
+        markdown = markdown.replace(reference.FAMILIES_MARKER, reference.effect_families_table())
+    return markdown
 
 
 def on_files(files, config):

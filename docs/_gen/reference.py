@@ -433,3 +433,25 @@ def api_page(package: str) -> str:
 def api_pages() -> dict[str, str]:
     """`reference/api/<package>.md` -> page text, for every public package."""
     return {f"reference/api/{p}.md": api_page(p) for p in public_packages()}
+
+
+# ---------------------------------------------------------------------------------------------
+# Effect families (a table substituted into pages at a marker)
+
+FAMILIES_MARKER = "<!-- generated: effect families -->"
+
+
+def effect_families_table() -> str:
+    """The registered effect families of `hdjax.effects`: report keys, plant effects, summary."""
+    from hdjax import effects
+
+    rows = [
+        "| family | keys in a discover report | plant effects | what it is |",
+        "|---|---|---|---|",
+    ]
+    for family in effects.families():
+        doc = (inspect.getdoc(type(family)) or "").split("\n\n")[0].replace("\n", " ")
+        keys = ", ".join(f"`{k.strip()}`" for k in family.vocabulary.split(",") if k.strip())
+        plant = ", ".join(f"`{p.name}`" for p in family.plant_effects)
+        rows.append(f"| `{family.name}` | {keys or 'not proposed'} | {plant} | {_cell(doc)} |")
+    return "\n".join(rows) + "\n"
