@@ -40,8 +40,10 @@ from ._errors import (  # noqa: E402
     UnitWarning as UnitWarning,
 )
 from ._features import (  # noqa: E402
+    Signals as Signals,
     find_gaps as find_gaps,
     finite_difference_velocity as finite_difference_velocity,
+    signals as signals,
     smoothed_velocity as smoothed_velocity,
     twist as twist,
 )
