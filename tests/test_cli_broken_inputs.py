@@ -653,7 +653,7 @@ CASES = [
         None,
         2,
         None,
-        ["ratio 160"],
+        ["ratio is 160", "--force"],
     ),
     # -- missing and malformed files ------------------------------------------------------
     (
@@ -949,6 +949,18 @@ CASES.append(
         ["warning", "--force: estimating anyway"],
     )
 )
+
+
+def _train_on_ratio_csv(root: Path):
+    _ratio_csv(root)
+    cfg = root / "proj" / "cfg.toml"
+    cfg.write_text(cfg.read_text().replace('"data.csv"', '"ratio.csv"'))
+
+
+CASES += [
+    ("run-ratio", RUN + ["--out", "o"], _train_on_ratio_csv, 2, None, ["ratio is 160", "--force"]),
+    ("sweep-ratio", SWEEP + ["--out", "o"], _train_on_ratio_csv, 2, None, ["ratio is 160"]),
+]
 
 
 def _encoding_in_discover_config(path: Path) -> bytes:

@@ -99,6 +99,12 @@ def add_common(p: argparse.ArgumentParser) -> None:
         help="change one setting of the config, e.g. --set model.poly_order=4 (repeatable; "
         'values are TOML: 4, 1.5, true, [20, 20], "text")',
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="run even when a recording's motor/output angle ratio differs from the joint's "
+        "(refused by default: the calibration would be wrong)",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress lines on stderr")
 
 
