@@ -18,7 +18,7 @@ Sub-packages (imported on first access, so `import hdjax` stays light):
 - `hdjax.report`: metrics, figures and reports.
 """
 
-from ._signals import guard_startup as _guard_startup
+from ._interrupts import guard_startup as _guard_startup
 
 _guard_startup()  # the `hdjax` command: a signal while JAX is imported exits at once (130/143)
 
@@ -40,8 +40,10 @@ from ._errors import (  # noqa: E402
     UnitWarning as UnitWarning,
 )
 from ._features import (  # noqa: E402
+    Signals as Signals,
     find_gaps as find_gaps,
     finite_difference_velocity as finite_difference_velocity,
+    signals as signals,
     smoothed_velocity as smoothed_velocity,
     twist as twist,
 )

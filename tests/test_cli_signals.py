@@ -149,3 +149,31 @@ def test_sigterm_mid_sweep_keeps_finished_members(tmp_path):
     assert 1 <= len(kept) < 10 and kept[0].startswith("000_")
     leftovers = [p for p in tmp_path.rglob("*") if ".tmp" in p.name]
     assert not leftovers
+
+
+def test_a_swallowed_interrupt_still_ends_the_command(tmp_path, monkeypatch, capsys):
+    """Python drops an exception raised inside some callbacks (JAX's garbage-collection callback
+    is one); the signal is remembered and ends the command at its next step, with no result."""
+    from hdjax.cli import main
+    from hdjax.config import _pipeline
+
+    (tmp_path / "cfg.toml").write_text(CONFIG.replace("timing = true", "timing = false"))
+    real = _pipeline.calibrate
+
+    def calibrate_with_a_swallowed_ctrl_c(*a, **k):
+        try:
+            signal.raise_signal(signal.SIGINT)
+        except BaseException:  # what a callback that swallows exceptions does
+            pass
+        return real(*a, **k)
+
+    monkeypatch.setattr(_pipeline, "calibrate", calibrate_with_a_swallowed_ctrl_c)
+    before = signal.getsignal(signal.SIGINT)
+    code = main(["run", str(tmp_path / "cfg.toml"), "--out", str(tmp_path / "o"), "-q"])
+    assert code == 130
+    assert capsys.readouterr().err.strip() == "hdjax: interrupted (SIGINT)"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cfg.toml"]
+    assert signal.getsignal(signal.SIGINT) is before  # the handlers are restored
+    from hdjax._interrupts import pending
+
+    assert pending() is None  # and the next command in this process starts clean

@@ -54,6 +54,22 @@ def test_stream_equals_in_memory(recs, velocity, hysteresis):
     assert_same_fit(mem, streamed)
 
 
+def test_well_conditioned_stream_reads_once(recs, monkeypatch):
+    """Below REFINE_ABOVE_COND the log is read once (no refinement pass) and still agrees."""
+    import hdjax.compliance._stream_fit as S
+
+    m = ComplianceModel.paper(JOINT, current_scale=1.0, poly_order=1, kinematic="none",
+                              per_segment=False)  # fmt: skip
+    mem = calibrate_lstsq(m, stacked_signals(m, recs))
+    assert mem.condition < S.REFINE_ABOVE_COND
+    passes = []
+    real = S._passes
+    monkeypatch.setattr(S, "_passes", lambda *a: passes.append(1) or real(*a))
+    streamed = calibrate_stream(m, RecordingStream.from_recordings(recs, CHUNK), chunk=CHUNK)
+    assert len(passes) == 1
+    assert_same_fit(mem, streamed)
+
+
 def test_stream_qr_path_equals_in_memory(recs, monkeypatch):
     """With the semi-normal equations refused, both fall back to QR (TSQR when streamed)."""
     import hdjax.compliance._lstsq as L

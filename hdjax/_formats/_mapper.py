@@ -83,6 +83,8 @@ class ChunkMapper:
             if name not in self.first:
                 self.first[name] = float(x[0])
             return (x - self.first[name]) * spec.scale
+        if spec.scale == 1.0 and spec.offset == 0.0:
+            return x  # identity: skip two passes over the column
         return x * spec.scale + float(spec.offset)
 
     def __call__(self, table: dict[str, np.ndarray]):

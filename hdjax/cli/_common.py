@@ -65,7 +65,7 @@ class Progress:
         self.t0 = time.perf_counter()
 
     def __call__(self, message: str) -> None:
-        from .._signals import check
+        from .._interrupts import check
 
         check()  # a signal whose exception was swallowed ends the command here
         if self.quiet:

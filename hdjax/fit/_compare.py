@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._features import signals
 from .._joint import Joint
 from .._metrics import error_metrics
 from ._inputs import DAHL_FRACTIONS
@@ -124,7 +125,7 @@ def compare_methods(
     structure = hc.ComplianceModel.paper(
         joint, per_segment=False, kinematic="harmonic", current_scale=10.0
     )
-    sig_train = _concat([hc.signals_from_recording(r, joint.ratio) for r in train])
+    sig_train = _concat([signals(r, joint) for r in train])
     tq_train = jnp.concatenate([r.torque for r in train])
     train_all = _join(train)
 

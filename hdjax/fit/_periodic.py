@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._features import signals
 from .._joint import Joint
 from .._metrics import error_metrics
 
@@ -70,7 +71,7 @@ def periodic_features_effect(
         train = [sim(s, 0) for s in plant.SCENARIOS]
         test = {s: sim(s, 1) for s in plant.SCENARIOS}
         train_all = _join(train)
-        sig = _concat([hc.signals_from_recording(r, joint.ratio) for r in train])
+        sig = _concat([signals(r, joint) for r in train])
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             ls = hc.calibrate_lstsq(structure, (sig, jnp.concatenate([r.torque for r in train])))
