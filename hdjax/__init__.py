@@ -20,7 +20,7 @@ Sub-packages (imported on first access, so `import hdjax` stays light):
 - `hdjax.report`: metrics, figures and reports.
 """
 
-from ._signals import guard_startup as _guard_startup
+from ._interrupts import guard_startup as _guard_startup
 
 _guard_startup()  # the `hdjax` command: a signal while JAX is imported exits at once (130/143)
 
