@@ -111,7 +111,7 @@ def command(args, parser) -> int:
     if args.method == "network":
         if saved.network is None:
             raise ModelMismatchError(f"{model_path}: holds no network; use --method model")
-        from ..network import estimate_torque as net_estimate
+        from ..network import predict_torque as net_estimate
 
         cols["torque_estimate"] = np.asarray(net_estimate(saved.network, rec, saved.joint))
     else:

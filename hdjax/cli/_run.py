@@ -139,7 +139,7 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
             "scenarios": P.metrics_of(est_n, ds.test, rated),
         }
         if outputs["timing"]:
-            from ..network import estimate_torque as net_estimate
+            from ..network import predict_torque as net_estimate
 
             metrics["network"]["timing"] = P.time_per_100(
                 lambda r: net_estimate(net, r, joint), first_test, outputs["timing_repeats"]

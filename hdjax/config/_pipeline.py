@@ -147,7 +147,7 @@ def network_available() -> str:
     try:
         from .. import network  # noqa: F401
 
-        for name in ("Network", "build_features", "train_optax", "estimate_torque"):
+        for name in ("Network", "build_features", "train_optax", "predict_torque"):
             getattr(network, name)
     except (ImportError, AttributeError) as err:
         return f"hdjax.network is not available ({err})"
@@ -223,7 +223,7 @@ def estimate_network(net, joint: Joint, recordings: dict[str, Recording]) -> dic
     """Torque estimates of a trained network on each recording (name -> array)."""
     from .. import network as nw
 
-    return {name: nw.estimate_torque(net, rec, joint) for name, rec in recordings.items()}
+    return {name: nw.predict_torque(net, rec, joint) for name, rec in recordings.items()}
 
 
 # ---------------------------------------------------------------------------------------------
