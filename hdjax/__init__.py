@@ -13,14 +13,21 @@ Sub-packages (imported on first access, so `import hdjax` stays light):
 - `hdjax.network`: the Kalman-filtered current and the back-propagation network.
 - `hdjax.fit`: joint gradient fitting of compliance, network and plant.
 - `hdjax.discover`: the residual loop (find, trace, add, refit, report).
+- `hdjax.effects`: the catalogue of physical effects, one module per family (plant effect,
+  regression term, candidates).
 - `hdjax.strain`: Hashimoto et al. (1993) strain-gauge sensing and joint torque control.
+- `hdjax.reference`: joint-torque references from a force/torque sensor and the arm's Jacobian.
 - `hdjax.report`: metrics, figures and reports.
 """
 
-import importlib
-import importlib.metadata
+from ._interrupts import guard_startup as _guard_startup
 
-import jax
+_guard_startup()  # the `hdjax` command: a signal while JAX is imported exits at once (130/143)
+
+import importlib  # noqa: E402
+import importlib.metadata  # noqa: E402
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
@@ -35,8 +42,10 @@ from ._errors import (  # noqa: E402
     UnitWarning as UnitWarning,
 )
 from ._features import (  # noqa: E402
+    Signals as Signals,
     find_gaps as find_gaps,
     finite_difference_velocity as finite_difference_velocity,
+    signals as signals,
     smoothed_velocity as smoothed_velocity,
     twist as twist,
 )
@@ -51,13 +60,25 @@ from ._io import (  # noqa: E402
 from ._joint import Joint as Joint, load_joint as load_joint  # noqa: E402
 from ._metrics import ErrorMetrics as ErrorMetrics, error_metrics as error_metrics  # noqa: E402
 from ._recording import Recording as Recording, make_recording as make_recording  # noqa: E402
+from ._solution import RESULTS as RESULTS, Solution as Solution  # noqa: E402
 
 try:
     __version__ = importlib.metadata.version("hdjax")
 except importlib.metadata.PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0+unknown"
 
-_SUBPACKAGES = ("compliance", "plant", "network", "fit", "discover", "strain", "report", "config")
+_SUBPACKAGES = (
+    "compliance",
+    "plant",
+    "network",
+    "fit",
+    "discover",
+    "effects",
+    "strain",
+    "reference",
+    "report",
+    "config",
+)
 
 
 def __getattr__(name: str):

@@ -16,6 +16,7 @@ import difflib
 import math
 import os
 import tempfile
+import zipfile
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -25,19 +26,88 @@ from ._errors import ConfigError, DataError
 from ._recording import SIGNAL_COLUMNS, Recording, make_recording
 
 _COLUMN_KEYS = ("source", "scale", "offset", "counts_per_rev", "modulus")
+TOML_HINT = "TOML files are UTF-8; save the file as UTF-8"
+
+
+_ENCODING_HINT = (
+    'save the file as UTF-8, or name its encoding in the column map (e.g. encoding = "latin-1" '
+    "in the [data] table)"
+)
+
+
+def check_encoding(name, *, where: str = "encoding") -> str:
+    """A text encoding name Python knows (`"utf-8"`, `"latin-1"`, `"cp1252"`...), else a
+    `ConfigError`."""
+    import codecs
+
+    if not isinstance(name, str):
+        raise ConfigError(f'{where} must be a string such as "latin-1", got {name!r}')
+    try:
+        return codecs.lookup(name).name
+    except LookupError:
+        raise ConfigError(
+            f'{where}: unknown text encoding {name!r}; use a name such as "utf-8", "latin-1" or '
+            '"cp1252"'
+        ) from None
+
+
+def decode_text(data: bytes, where, encoding: str | None = None, *, hint: str = "") -> str:
+    """Text of a file's bytes: UTF-8 with or without a byte-order mark by default, else the
+    named `encoding`.
+
+    **Raises:** [`hdjax.DataError`][] naming the file and the byte position of the first byte
+    that does not decode (and the line it is on), for UTF-16/32 text and for NUL bytes.
+    """
+    hint = hint or _ENCODING_HINT
+    name = "utf-8" if encoding is None else check_encoding(encoding)
+    if name == "utf-8":
+        for bom, what in ((b"\xff\xfe", "UTF-16 or UTF-32"), (b"\xfe\xff", "UTF-16")):
+            if data.startswith(bom):
+                raise DataError(f"{where}: the file is {what} text, not UTF-8; {hint}")
+        name = "utf-8-sig"  # a spreadsheet's byte-order mark is dropped
+    try:
+        text = data.decode(name)
+    except UnicodeDecodeError as err:
+        line = data.count(b"\n", 0, err.start) + 1
+        raise DataError(
+            f"{where}: not valid {encoding or 'UTF-8'} text: byte 0x{data[err.start]:02x} at byte "
+            f"position {err.start} (line {line}); {hint}"
+        ) from None
+    nul = text.find("\x00")
+    if nul >= 0:
+        pos = len(text[:nul].encode(name))
+        raise DataError(
+            f"{where}: a NUL byte at byte position {pos}, so this is not a text file; give a text "
+            "file (or a .npz / .parquet recording)"
+        )
+    return text
+
+
+def read_text(path, *, encoding: str | None = None, what: str = "file", hint: str = "") -> str:
+    """The text of a file (see [`decode_text`][]); a missing file or a folder is a
+    `DataError`."""
+    path = Path(path)
+    if not path.exists():
+        raise DataError(f"{path}: no such {what}")
+    if path.is_dir():
+        raise DataError(f"{path}: is a folder; give a {what}")
+    return decode_text(path.read_bytes(), path, encoding, hint=hint)
 
 
 def read_toml(path) -> dict:
     """Parse a TOML file; a missing file or a syntax error becomes a `ConfigError` naming the
-    file, line and column."""
+    file, line and column; text that is not UTF-8 becomes a `DataError` naming the byte."""
     import re
     import tomllib
 
     path = Path(path)
     if not path.exists():
         raise ConfigError(f"{path}: no such file")
+    if path.is_dir():
+        raise ConfigError(f"{path}: is a folder; give a TOML file")
+    text = read_text(path, what="TOML file", hint=TOML_HINT)
     try:
-        return tomllib.loads(path.read_text())
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         m = re.search(r"\(at line (\d+), column (\d+)\)", str(err))
         where = f"{path}:{m.group(1)}:{m.group(2)}" if m else str(path)
@@ -87,13 +157,16 @@ class ColumnMap:
     **Arguments:**
 
     - `columns`: schema name (`t`, `theta_m`, `theta_l`, `current`, `torque`) to a
-      [`hdjax.ColumnSpec`][]; unmapped schema names are read from a column of the same name.
+      `ColumnSpec`; unmapped schema names are read from a column of the same name.
     - `extras`: extra column name to spec; `None` keeps every other numeric column of the file
       under its own name, an empty mapping keeps none.
+    - `encoding`: the text encoding of CSV files (default UTF-8, with or without a byte-order
+      mark), e.g. `"latin-1"` for a log whose header holds `temp_°C` in Latin-1.
     """
 
     columns: Mapping[str, ColumnSpec] = dataclasses.field(default_factory=dict)
     extras: Mapping[str, ColumnSpec] | None = None
+    encoding: str | None = None
 
     @classmethod
     def from_dict(cls, table: Mapping, *, where: str = "[data]") -> ColumnMap:
@@ -102,12 +175,14 @@ class ColumnMap:
         Each entry is either a source column name or a table with `source`, `scale`,
         `offset`, `counts_per_rev`, `modulus`.
         """
-        unknown = set(table) - {"columns", "extras"}
+        keys = ["columns", "extras", "encoding"]
+        unknown = set(table) - set(keys)
         if unknown:
             key = sorted(unknown)[0]
-            raise ConfigError(
-                f"{where}: unknown key {key!r}{did_you_mean(key, ['columns', 'extras'])}"
-            )
+            raise ConfigError(f"{where}: unknown key {key!r}{did_you_mean(key, keys)}")
+        for key in ("columns", "extras"):
+            if table.get(key) is not None and not isinstance(table[key], Mapping):
+                raise ConfigError(f"{where}.{key} must be a table, got {table[key]!r}")
         columns = {}
         for name, entry in (table.get("columns") or {}).items():
             if name not in SIGNAL_COLUMNS:
@@ -120,7 +195,10 @@ class ColumnMap:
         extras = table.get("extras")
         if extras is not None:
             extras = {k: _spec(v, f"{where}.extras.{k}") for k, v in extras.items()}
-        return cls(columns=columns, extras=extras)
+        encoding = table.get("encoding")
+        if encoding is not None:
+            encoding = check_encoding(encoding, where=f"{where}.encoding")
+        return cls(columns=columns, extras=extras, encoding=encoding)
 
 
 def _spec(entry, where: str) -> ColumnSpec:
@@ -159,19 +237,28 @@ def _spec(entry, where: str) -> ColumnSpec:
 # Reading
 
 
-def _read_csv_table(path: Path) -> tuple[list[str], np.ndarray]:
+def _read_csv_table(path: Path, encoding: str | None = None) -> tuple[list[str], np.ndarray]:
     """Header and float64 body of a CSV file, with messages that name the bad cell."""
+    import io
+
     if not path.exists():
         raise DataError(f"{path}: no such file")
+    if path.is_dir():
+        raise DataError(f"{path}: is a folder; give a recording file (.csv, .npz, ...)")
     if path.stat().st_size == 0:
         raise DataError(f"{path}: the file is empty; expected a header row and data rows")
-    with path.open(newline="") as fh:
-        reader = csv.reader(fh)
+    text = decode_text(path.read_bytes(), path, encoding)
+    reader = csv.reader(io.StringIO(text, newline=""))
+    try:
         try:
             header = [h.strip() for h in next(reader)]
         except StopIteration:
             raise DataError(f"{path}: the file is empty; expected a header row") from None
         rows = list(reader)
+    except csv.Error as err:
+        raise DataError(f"{path}: not a readable CSV file ({err}); check the file") from None
+    if not any(header):
+        raise DataError(f"{path}: the first line is empty; expected a header row")
     if len(set(header)) != len(header):
         dup = sorted({h for h in header if header.count(h) > 1})
         raise DataError(f"{path}: duplicated column name(s) in the header: {', '.join(dup)}")
@@ -253,7 +340,7 @@ def load_csv(path, columns: ColumnMap | None = None, *, check_units: bool = True
     [`hdjax.ColumnMap`][] the columns are renamed, scaled and offset first.
     """
     path = Path(path)
-    header, body = _read_csv_table(path)
+    header, body = _read_csv_table(path, None if columns is None else columns.encoding)
     table = {name: body[:, j] for j, name in enumerate(header)}
     return _build(table, columns, str(path), check_units)
 
@@ -263,10 +350,12 @@ def load_npz(path, columns: ColumnMap | None = None, *, check_units: bool = True
     path = Path(path)
     if not path.exists():
         raise DataError(f"{path}: no such file")
+    if path.is_dir():
+        raise DataError(f"{path}: is a folder; give a recording file (.csv, .npz, ...)")
     try:
-        with np.load(path, allow_pickle=False) as archive:
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as archive:
             table = {k: np.asarray(archive[k]) for k in archive.files}
-    except (OSError, ValueError) as err:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
         raise DataError(f"{path}: not a readable .npz archive ({err})") from None
     if not table:
         raise DataError(f"{path}: the archive is empty")
@@ -274,27 +363,54 @@ def load_npz(path, columns: ColumnMap | None = None, *, check_units: bool = True
 
 
 def load_recording(path, columns: ColumnMap | None = None, *, check_units: bool = True):
-    """Load a recording from `.csv` or `.npz`, chosen by the file's suffix."""
+    """Load a recording chosen by the file's suffix: `.csv`, `.npz`, or a format of
+    `hdjax._formats` (Parquet, HDF5 / MATLAB v7.3, MCAP)."""
+    if Path(path).is_dir():
+        raise DataError(f"{path}: is a folder; give a recording file (.csv, .npz, ...)")
     suffix = Path(path).suffix.lower()
     if suffix == ".csv":
         return load_csv(path, columns, check_units=check_units)
     if suffix == ".npz":
         return load_npz(path, columns, check_units=check_units)
-    raise DataError(f"{path}: unknown recording format {suffix!r}; use .csv or .npz")
+    from ._formats import load as load_other  # Parquet, HDF5, MATLAB v7.3, MCAP
+
+    return load_other(path, columns, check_units=check_units)
 
 
 # ---------------------------------------------------------------------------------------------
 # Writing
 
 
+def _umask() -> int:
+    """The process's umask (read without changing it where /proc allows)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def file_mode() -> int:
+    """The mode a new file gets from a plain `open` under this process's umask (0644 under the
+    usual 022): give it to a file created by `tempfile.mkstemp` (0600) before renaming it."""
+    return 0o666 & ~_umask()
+
+
 def atomic_write_bytes(path, data: bytes) -> None:
-    """Write `data` to `path` through a temporary file and a rename (never half-written)."""
+    """Write `data` to `path` through a temporary file and a rename (never half-written); the
+    file gets the mode a plain `open` would give it (0644 under the usual umask 022)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
+        os.chmod(tmp, file_mode())  # mkstemp makes 0600; results follow the umask
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

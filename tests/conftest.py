@@ -1,5 +1,9 @@
 """Test configuration: float64, strict dtype promotion, and shared paths."""
 
+import atexit
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import jax
@@ -7,6 +11,13 @@ import pytest
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
+
+# The CLI keeps JAX's compilation cache in $XDG_CACHE_HOME/hdjax: never the real home's in
+# tests, and off unless a test turns it on (tests/test_cache.py does, in a subprocess).
+_CACHE_HOME = tempfile.mkdtemp(prefix="hdjax-test-xdg-")
+atexit.register(shutil.rmtree, _CACHE_HOME, ignore_errors=True)
+os.environ["XDG_CACHE_HOME"] = _CACHE_HOME
+os.environ["HDJAX_NO_CACHE"] = "1"
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"

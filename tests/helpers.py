@@ -191,3 +191,34 @@ def numpy_design(model: ComplianceModel, sig: Signals, torque) -> np.ndarray:
         blocks = [base * (seg == s)[:, None] for s in range(model.n_segments)]
         return np.concatenate([H] + blocks, axis=1)
     return np.concatenate([H, base], axis=1)
+
+
+def png_image(data) -> np.ndarray:
+    """Decode PNG bytes (or a path) into an (height, width, channels) array in [0, 1]."""
+    import io
+    from pathlib import Path
+
+    import matplotlib.image
+
+    if isinstance(data, str | Path):
+        data = Path(data).read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n", "not a PNG file"
+    return matplotlib.image.imread(io.BytesIO(data), format="png")
+
+
+def assert_figure(data, size: tuple[int, int], *, min_ink: float = 0.01) -> np.ndarray:
+    """Check a rendered figure: a PNG of `size` = (width, height) pixels that is not blank.
+
+    "Not blank": at least `min_ink` of the pixels differ from the background colour (the most
+    common one) and the image has more than a handful of distinct colours (lines, text and
+    anti-aliasing), which an empty canvas or a single filled rectangle does not.
+    """
+    img = png_image(data)
+    assert (img.shape[1], img.shape[0]) == tuple(size), f"image is {img.shape[1]}x{img.shape[0]}"
+    flat = np.round(img.reshape(-1, img.shape[-1]) * 255).astype(np.uint8)
+    colours, counts = np.unique(flat, axis=0, return_counts=True)
+    background = colours[np.argmax(counts)]
+    ink = np.mean(np.any(flat != background, axis=1))
+    assert ink >= min_ink, f"only {ink:.2%} of the pixels are drawn"
+    assert len(colours) > 16, f"only {len(colours)} colours: an empty plot"
+    return img

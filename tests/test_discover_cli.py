@@ -72,6 +72,10 @@ def test_figures_and_markdown(files, tmp_path):
     assert {"spectrum_0.png", "residual_0.png", "residual_1.png", "torque.png"} <= names
     md = (out / "report.md").read_text()
     assert "harmonic:theta_m:2" in md and "figures/torque.png" in md
+    from .helpers import assert_figure
+
+    assert_figure(out / "figures" / "torque.png", (1100, 550))  # 10 x 5 in at 110 dpi
+    assert_figure(out / "figures" / "residual_0.png", (1100, 352))
 
 
 def test_refuses_non_empty_out_without_overwrite(files, tmp_path, capsys):

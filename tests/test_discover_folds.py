@@ -15,7 +15,6 @@ import scipy.signal
 
 import hdjax
 from hdjax.compliance import ComplianceModel, Hysteresis, Signals, dahl_state, estimate_torque
-from hdjax.compliance._terms import SEGMENT_START
 from hdjax.discover import pipeline_signals
 from hdjax.discover._folds import (
     contiguous_blocks,
@@ -24,6 +23,7 @@ from hdjax.discover._folds import (
     segment_starts,
 )
 from hdjax.discover._select import block_grams, cv_gains, cv_gains_by_blocks, fold_basis
+from hdjax.effects import SEGMENT_START
 
 JOINT = hdjax.Joint(ratio=160, rated_torque=400)
 

@@ -29,9 +29,8 @@ from hdjax.compliance import (
     TwistRate,
     Viscous,
 )
-from hdjax.discover import DiscoverOptions, discover, refit_structure
-from hdjax.discover._hysteresis import TwistHysteresis
-from hdjax.discover._loop import calibrate_baseline, small_torque_compliance
+from hdjax.discover import DiscoverOptions, discover, pipeline_signals, refit_structure
+from hdjax.effects import TwistHysteresis, twist_compliance
 
 ARCMIN = math.pi / (180 * 60)
 JOINT = hdjax.Joint(ratio=160, rated_torque=400)
@@ -141,14 +140,10 @@ def data():
 
 
 def _true_rms(train, test, terms):
-    base = calibrate_baseline(train, JOINT, DiscoverOptions(), [])
+    data = pipeline_signals(train, JOINT.ratio, JOINT.twist_sign, "difference")
+    k = twist_compliance(data.sig, data.torque, JOINT.rated_torque)
     # the plant's hysteresis follows the deflection: a Dahl state of the measured twist
-    terms = [
-        TwistHysteresis(t.torque_scale, small_torque_compliance(base))
-        if isinstance(t, Hysteresis)
-        else t
-        for t in terms
-    ]
+    terms = [TwistHysteresis(t.torque_scale, k) if isinstance(t, Hysteresis) else t for t in terms]
     return refit_structure(train, test, JOINT, terms).rms
 
 

@@ -92,3 +92,16 @@ def test_numpy_candidate_columns_equal_the_model_terms():
             rtol=0,
             atol=1e-13,
         )
+    # the Hysteresis column has no NumPy shortcut in the library (it is the model's own scan),
+    # so it is checked against the Dahl recursion written out here, sample by sample
+    dT = np.diff(np.asarray(rec.torque), prepend=float(rec.torque[0])) / 20.0
+    z, ref = 0.0, np.empty(dT.size)
+    for i, d in enumerate(dT):
+        z = min(1.0, max(-1.0, z + d * (1.0 - z * np.sign(d))))
+        ref[i] = z
+    assert np.ptp(ref) > 1.0  # the torque path drives the state through a loop
+    got = np.asarray(Hysteresis(20.0).columns(sig, rec.torque))[:, 0]
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        candidate_columns(Hysteresis(20.0), sig, rec.torque)[:, 0], ref, rtol=0, atol=1e-12
+    )

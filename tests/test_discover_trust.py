@@ -28,10 +28,10 @@ from hdjax import plant
 from hdjax.compliance import ColumnTimesTorque, Coulomb, Harmonics
 from hdjax.discover import DiscoverOptions, discover, refit_structure
 from hdjax.discover._folds import correlation_length
-from hdjax.discover._hysteresis import TwistHysteresis
-from hdjax.discover._loop import _as_data, calibrate_baseline, small_torque_compliance
+from hdjax.discover._loop import _as_data, calibrate_baseline
 from hdjax.discover._pipeline import calibrate, design, estimate
 from hdjax.discover._uncertainty import effect_intervals
+from hdjax.effects import TwistHysteresis, twist_compliance
 
 from .discover_batch import simulate_draws
 
@@ -105,7 +105,8 @@ def test_hysteresis_reaches_the_true_structure(name):
     )
     res = discover(train, test, JOINT, OPTIONS)
     base = calibrate_baseline(train, JOINT, OPTIONS, [])
-    terms = [TwistHysteresis(frac * RATED, small_torque_compliance(base))]
+    data = _as_data(base, train)
+    terms = [TwistHysteresis(frac * RATED, twist_compliance(data.sig, data.torque, RATED))]
     if "harmonic_m" in effects:
         terms.append(Harmonics("theta_m", (2.0,)))
     if "temperature" in effects:

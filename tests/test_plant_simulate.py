@@ -181,7 +181,9 @@ def test_unknown_scenario_and_bad_options():
 
 
 def test_plot_scenario_writes_png(scenarios, tmp_path):
+    from .helpers import assert_figure
+
     out = plant.plot_scenario(scenarios["sudden"], tmp_path / "sudden.png")
-    assert out.exists() and out.stat().st_size > 10_000
+    assert_figure(out, (1210, 770), min_ink=0.03)  # 11 x 7 in at 110 dpi, four panels drawn
     with pytest.raises(hdjax.ConfigError, match="does not exist"):
         plant.plot_scenario(scenarios["sudden"], tmp_path / "nope" / "x.png")

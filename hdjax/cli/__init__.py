@@ -1,12 +1,16 @@
 """The `hdjax` command: `run`, `sweep`, `estimate`, `discover` and `bench`.
 
-Every [`hdjax.HdjaxError`][] (and every usage error) becomes one line on stderr and exit code
-2; an unknown command or option gets a "did you mean" answer. Warnings are printed as one
+Every [`hdjax.HdjaxError`][], usage error and user-caused `OSError` becomes one line on stderr
+(`hdjax: error: <file>: <what went wrong>; <what to do>`) and exit code 2; an unknown command
+or option gets a "did you mean" answer. SIGINT and SIGTERM end a command with exit code 130 or
+143 and remove its staging folder (a sweep keeps its finished members). Warnings are printed as one
 `hdjax: warning:` line each.
 """
 
 from __future__ import annotations
 
+import errno
+import os
 import sys
 import warnings
 
@@ -14,7 +18,7 @@ from .._errors import HdjaxError
 from .._io import did_you_mean
 from ._common import Parser, ParserExit, UsageError
 
-COMMANDS = ("run", "sweep", "estimate", "discover", "bench")
+COMMANDS = ("run", "sweep", "estimate", "discover", "bench", "convert", "fleet")
 
 DESCRIPTION = """\
 Torque estimation for robotic joints with harmonic drives (Song et al. 2019), in JAX.
@@ -29,39 +33,31 @@ example:
 
 
 def _parser() -> Parser:
+    from ..discover import _cli as _discover
     from . import _bench, _estimate, _run, _sweep
 
     p = Parser(prog="hdjax", description=DESCRIPTION, epilog=EXAMPLE)
     p.add_argument("--version", action="store_true", help="print the version and exit")
+    p.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="do not use the compilation cache in $XDG_CACHE_HOME/hdjax (any command takes it)",
+    )
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     _run.add_parser(sub)
     _sweep.add_parser(sub)
     _estimate.add_parser(sub)
-    sub.add_parser(
-        "discover",
-        help="residual loop: find, trace and add missing effects (see 'hdjax discover --help')",
-        add_help=False,
-    )
+    _discover.add_parser(sub)
     _bench.add_parser(sub)
+    from . import _convert, _fleet
+
+    _convert.add_parser(sub)
+    _fleet.add_parser(sub)
     return p
 
 
-def _discover(argv: list[str]) -> int:
-    try:
-        from ..discover import cli_main
-    except ImportError as err:
-        raise UsageError(
-            f"hdjax discover: not available in this installation (hdjax.discover.cli_main "
-            f"cannot be imported: {err})"
-        ) from None
-    try:
-        return int(cli_main(list(argv)) or 0)
-    except SystemExit as done:  # its argparse answers --help and usage errors by exiting
-        code = done.code
-        return code if isinstance(code, int) else (0 if code is None else 2)
-
-
 def _dispatch(argv: list[str]) -> int:
+    from ..discover import _cli as _discover
     from . import _bench, _estimate, _run, _sweep
 
     if argv and not argv[0].startswith("-") and argv[0] not in COMMANDS:
@@ -69,8 +65,6 @@ def _dispatch(argv: list[str]) -> int:
             f"hdjax: unknown command {argv[0]!r}{did_you_mean(argv[0], COMMANDS)}; commands: "
             f"{', '.join(COMMANDS)}"
         )
-    if argv and argv[0] == "discover":
-        return _discover(argv[1:])
     parser = _parser()
     if not argv or argv[0].startswith("-"):
         args = parser.parse_strict(argv)
@@ -83,12 +77,58 @@ def _dispatch(argv: list[str]) -> int:
         return 0
     sub = parser._subparsers._group_actions[0].choices[argv[0]]
     args = sub.parse_strict(argv[1:])
-    handlers = {"run": _run, "sweep": _sweep, "estimate": _estimate, "bench": _bench}
+    handlers = {
+        "run": _run,
+        "sweep": _sweep,
+        "estimate": _estimate,
+        "discover": _discover,
+        "bench": _bench,
+    }
+    from . import _convert, _fleet
+
+    handlers["convert"], handlers["fleet"] = _convert, _fleet
     return handlers[argv[0]].command(args, sub)
+
+
+def _compilation_cache(argv: list[str]) -> list[str]:
+    """Turn JAX's persistent compilation cache on (off with `--no-cache`, accepted by every
+    command, or `HDJAX_NO_CACHE=1`); returns `argv` without `--no-cache`."""
+    from .._cache import disable_compilation_cache, enable_compilation_cache
+
+    end = argv.index("--") if "--" in argv else len(argv)
+    off = "--no-cache" in argv[:end] or os.environ.get("HDJAX_NO_CACHE", "") not in ("", "0")
+    if off:
+        disable_compilation_cache()
+    else:
+        enable_compilation_cache()
+    return [a for i, a in enumerate(argv) if not (a == "--no-cache" and i < end)]
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
     print(f"hdjax: warning: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+
+
+_OS_ADVICE = {
+    errno.EACCES: "check its permissions or choose another location",
+    errno.EPERM: "check its permissions or choose another location",
+    errno.EROFS: "the file system is read-only; choose another location",
+    errno.ENOSPC: "the disk is full; free some space or choose another location",
+    errno.EDQUOT: "the disk quota is exceeded; free some space or choose another location",
+    errno.ENOTDIR: "a part of the path is a file, not a folder; check the path",
+    errno.EISDIR: "it is a folder; give a file",
+    errno.ENOENT: "check the path",
+    errno.EEXIST: "it already exists; choose another name",
+    errno.ENAMETOOLONG: "use a shorter name",
+    errno.EBUSY: "it is in use; choose another location",
+}
+
+
+def os_error_line(err: OSError) -> str:
+    """`<file>: <what went wrong>; <what to do>` for an `OSError` a user caused."""
+    where = err.filename if err.filename is not None else "hdjax"
+    what = (err.strerror or str(err)).lower()
+    advice = _OS_ADVICE.get(err.errno, "check the path and try again")
+    return f"{where}: {what}; {advice}"
 
 
 def main(argv=None) -> int:
@@ -98,22 +138,46 @@ def main(argv=None) -> int:
 
     - `argv`: the arguments after the program name (default `sys.argv[1:]`).
 
-    **Returns:** the exit code: 0 on success, 2 on bad input (one line on stderr), 130 when
-    interrupted.
+    **Returns:** the exit code: 0 on success, 2 on bad input (one line on stderr,
+    `hdjax: error: <file>: <what went wrong>; <what to do>`), 130 after SIGINT (Ctrl-C) and
+    143 after SIGTERM, with no partial result left behind.
     """
+    from .._interrupts import Interrupted, handling, pending
+
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
-    with warnings.catch_warnings():
+
+    def fail(text: str) -> int:
+        text = " ".join(str(text).split())
+        prefix = "" if text.startswith("hdjax") else "hdjax: error: "
+        print(f"{prefix}{text}", file=sys.stderr, flush=True)
+        return 2
+
+    def interrupted(signum: int) -> int:
+        done = Interrupted(signum)
+        print(f"hdjax: interrupted ({done.name})", file=sys.stderr, flush=True)
+        return done.exit_code
+
+    with handling(), warnings.catch_warnings():
         warnings.simplefilter("always")
         warnings.showwarning = _show_warning
         try:
-            return _dispatch(argv)
-        except (HdjaxError, UsageError) as err:
-            text = " ".join(str(err).split())
-            prefix = "" if text.startswith("hdjax") else "hdjax: error: "
-            print(f"{prefix}{text}", file=sys.stderr, flush=True)
-            return 2
-        except ParserExit as done:
-            return done.status
+            argv = _compilation_cache(argv)
+            code = _dispatch(argv)
+        except Interrupted as done:
+            return interrupted(done.signum)
         except KeyboardInterrupt:
-            print("hdjax: interrupted", file=sys.stderr, flush=True)
-            return 130
+            return interrupted(2)
+        except (HdjaxError, UsageError) as err:
+            code = fail(str(err))
+        except UnicodeDecodeError as err:
+            code = fail(
+                f"cannot decode a text input ({err}); save the file as UTF-8, or set encoding "
+                "in its column map"
+            )
+        except OSError as err:
+            code = fail(os_error_line(err))
+        except ParserExit as done:
+            code = done.status
+        if pending() is not None:
+            return interrupted(pending())
+        return code

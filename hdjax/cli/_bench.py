@@ -31,6 +31,14 @@ def command(args, parser) -> int:
         raise ConfigError(f"--samples must be at least 1000, got {args.samples}")
     if args.repeats < 1:
         raise ConfigError(f"--repeats must be at least 1, got {args.repeats}")
+    from ..config import check_memory
+
+    # the order-8 design of the paper's structure: 5 + 5 x 21 columns, held about three times
+    check_memory(
+        args.samples * (110 * 8 * 3 + 40 * 8),
+        f"--samples {args.samples}",
+        "use fewer samples",
+    )
     result = bench_sweep(args.samples, args.repeats, Progress(args.quiet))
     print(json.dumps(result, indent=2))
     return 0

@@ -65,6 +65,9 @@ class Progress:
         self.t0 = time.perf_counter()
 
     def __call__(self, message: str) -> None:
+        from .._interrupts import check
+
+        check()  # a signal whose exception was swallowed ends the command here
         if self.quiet:
             return
         stream = self.stream or sys.stderr
@@ -96,4 +99,62 @@ def add_common(p: argparse.ArgumentParser) -> None:
         help="change one setting of the config, e.g. --set model.poly_order=4 (repeatable; "
         'values are TOML: 4, 1.5, true, [20, 20], "text")',
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="run even when a recording's motor/output angle ratio differs from the joint's "
+        "(refused by default: the calibration would be wrong)",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress lines on stderr")
+
+
+def experiment_inputs(exp) -> list:
+    """Every file an experiment reads: the config and each existing file its `[data]` table
+    names (train, test and any other file setting), for the output rules of
+    [`hdjax.report.check_output_dir`][]."""
+    from pathlib import Path
+
+    from ..config._dataset import resolve_path
+
+    paths = [exp.path] if getattr(exp, "path", None) is not None else []
+
+    def walk(v):
+        if isinstance(v, str):
+            if not v or len(v) > 4096:
+                return
+            try:
+                p = resolve_path(exp, v)
+                if p.exists():
+                    paths.append(Path(p))
+            except (OSError, ValueError):
+                pass
+        elif isinstance(v, dict):
+            for x in v.values():
+                walk(x)
+        elif isinstance(v, list | tuple):
+            for x in v:
+                walk(x)
+
+    walk(exp.get("data", {}))
+    return paths
+
+
+def read_column_map(path):
+    """The [`hdjax.ColumnMap`][] of a TOML file's `[data]` table (or of its top level):
+    `columns`, `extras` and the CSV text `encoding`; other keys of the table are ignored, so an
+    experiment config serves as a column map."""
+    from pathlib import Path
+
+    from .._errors import ConfigError
+    from .._io import TOML_HINT, ColumnMap, read_text
+    from ..config import parse_toml
+
+    cpath = Path(path)
+    if not cpath.exists():
+        raise ConfigError(f"{cpath}: no such column-map file")
+    doc = parse_toml(read_text(cpath, what="column-map file", hint=TOML_HINT), where=str(cpath))
+    table = doc.get("data", doc)
+    if not isinstance(table, dict):
+        raise ConfigError(f"{cpath}: [data] must be a table")
+    table = {k: v for k, v in table.items() if k in ("columns", "extras", "encoding")}
+    return ColumnMap.from_dict(table, where=f"{cpath} [data]")

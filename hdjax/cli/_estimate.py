@@ -18,7 +18,9 @@ a reference torque, torque_measured is added and the RMS / maximum error go to s
 def add_parser(sub) -> None:
     p = sub.add_parser("estimate", help=HELP, description=HELP, epilog=EXAMPLE)
     p.add_argument(
-        "--model", required=True, help="a model file written by 'hdjax run' (model.json)"
+        "--model",
+        required=True,
+        help="a model file written by 'hdjax run' (model.json), or the result folder holding it",
     )
     p.add_argument("--data", required=True, help="the recording (.csv or .npz)")
     p.add_argument("--out", required=True, help="where to write the estimate (.csv)")
@@ -38,51 +40,84 @@ def add_parser(sub) -> None:
         help="TOML file with the data's [joint] table; refused if its ratio differs from the "
         "model's",
     )
-    p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an estimate written earlier by hdjax at --out (never an input or another "
+        "file)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="estimate even when the angles look wrong for the model (degrees instead of "
+        "radians, or a motor/output angle ratio other than the model's); refused by default",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress lines on stderr")
 
 
 def command(args, parser) -> int:
     import io
+    import warnings
 
     import numpy as np
 
-    from .._errors import ConfigError, ModelMismatchError
-    from .._io import ColumnMap, atomic_write_bytes, load_recording
+    from .._errors import ConfigError, DataError, ModelMismatchError, UnitWarning
+    from .._io import atomic_write_bytes, load_recording
     from .._joint import load_joint
     from .._metrics import error_metrics
-    from ..config import check_compatible, load_model, parse_toml
-    from ._common import Progress
+    from ..config import check_compatible, load_model
+    from ..config._saved_model import angle_ratio_mismatch
+    from ..report import check_output_file
+    from ._common import Progress, read_column_map
 
     progress = Progress(args.quiet)
     out = Path(args.out)
-    if out.exists() and not args.overwrite:
-        raise ConfigError(f"output file {out} already exists; pass --overwrite to replace it")
-    saved = load_model(args.model)
-    cmap = None
-    if args.columns:
-        cpath = Path(args.columns)
-        if not cpath.exists():
-            raise ConfigError(f"{cpath}: no such column-map file")
-        doc = parse_toml(cpath.read_text(), where=str(cpath))
-        table = doc.get("data", doc)
-        table = {k: v for k, v in table.items() if k in ("columns", "extras")}
-        cmap = ColumnMap.from_dict(table, where=f"{cpath} [data]")
+    model_path = Path(args.model)
+    inputs = [model_path, args.data, args.columns, args.joint]
+    check_output_file(
+        out, inputs=inputs, overwrite=args.overwrite, ours=is_estimate, example="torque.csv"
+    )
+    if model_path.is_dir():
+        if not (model_path / "model.json").is_file():
+            raise ConfigError(
+                f"{model_path}: a folder without model.json; give the model.json written by "
+                "'hdjax run' (with [outputs] save_model = true)"
+            )
+        model_path = model_path / "model.json"
+    saved = load_model(model_path)
+    cmap = read_column_map(args.columns) if args.columns else None
     joint = load_joint(args.joint) if args.joint else None
-    rec = load_recording(args.data, cmap)
-    check_compatible(saved, rec, joint)
-    progress(f"estimating {rec.n_samples} samples with the {args.method} of {args.model}")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UnitWarning)
+        rec = load_recording(args.data, cmap)
+    for w in caught:
+        if not issubclass(w.category, UnitWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        elif args.force:
+            progress.warn(f"{w.message} (--force: estimating anyway; the torques may be wrong)")
+        else:
+            raise DataError(
+                f"{w.message}; the estimate would be wrong, so none is written (pass "
+                "--force to estimate anyway)"
+            )
+    check_compatible(saved, rec, joint, check_angles=False)
+    why = angle_ratio_mismatch(saved, rec)
+    if why and not args.force:
+        raise ModelMismatchError(f"{why}; pass --force to estimate anyway")
+    if why:
+        progress.warn(f"{why} (--force: estimating anyway; the torques may be wrong)")
+    progress(f"estimating {rec.n_samples} samples with the {args.method} of {model_path}")
     cols = {"t": np.asarray(rec.t)}
     if args.method == "network":
         if saved.network is None:
-            raise ModelMismatchError(f"{args.model}: holds no network; use --method model")
-        from ..network import estimate_torque as net_estimate
+            raise ModelMismatchError(f"{model_path}: holds no network; use --method model")
+        from ..network import predict_torque as net_estimate
 
         cols["torque_estimate"] = np.asarray(net_estimate(saved.network, rec, saved.joint))
     else:
         if saved.compliance is None:
             raise ModelMismatchError(
-                f"{args.model}: holds no compliance model; use --method network"
+                f"{model_path}: holds no compliance model; use --method network"
             )
         from ..compliance import estimate_torque
 
@@ -108,6 +143,20 @@ def command(args, parser) -> int:
         comments="",
         fmt="%.17g",
     )
+    check_output_file(out, inputs=inputs, overwrite=args.overwrite, ours=is_estimate)
     atomic_write_bytes(out, buf.getvalue().encode())
     progress(f"wrote {out}")
     return 0
+
+
+ESTIMATE_HEADER = "t,torque_estimate"
+
+
+def is_estimate(path: Path) -> bool:
+    """Whether `path` is an estimate CSV written by `hdjax estimate` (its header says so)."""
+    try:
+        with open(path, "rb") as fh:
+            first = fh.read(256)
+    except OSError:
+        return False
+    return first.startswith(ESTIMATE_HEADER.encode())

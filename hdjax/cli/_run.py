@@ -24,7 +24,12 @@ def add_parser(sub) -> None:
         help="result directory (default runs/NAME with NAME from [experiment] name); refused if "
         "it exists, unless --overwrite",
     )
-    p.add_argument("--overwrite", action="store_true", help="replace an existing result directory")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier hdjax result at --out (never any other folder, an input or the "
+        "current directory)",
+    )
     p.add_argument("--no-figures", action="store_true", help="skip the figures (faster)")
     p.add_argument("--no-network", action="store_true", help="skip the network method")
     from ._common import add_common
@@ -33,9 +38,9 @@ def add_parser(sub) -> None:
 
 
 def command(args, parser) -> int:
-    from ..config import load_experiment
+    from ..config import load_experiment, preflight
     from ..report import ResultDir
-    from ._common import Progress, parse_overrides
+    from ._common import Progress, experiment_inputs, parse_overrides
 
     progress = Progress(args.quiet)
     overrides = parse_overrides(args.set)
@@ -44,9 +49,11 @@ def command(args, parser) -> int:
     if args.no_network:
         overrides["network.enabled"] = False
     exp = load_experiment(args.config, overrides)
+    preflight(exp, base_dir=exp.base_dir, where=str(args.config))
     out = Path(args.out) if args.out else Path("runs") / exp["experiment"]["name"]
-    with ResultDir(out, overwrite=args.overwrite) as rd:
-        summary = run_experiment(exp, rd, progress)
+    inputs = experiment_inputs(exp)
+    with ResultDir(out, overwrite=args.overwrite, inputs=inputs, command="run") as rd:
+        summary = run_experiment(exp, rd, progress, force=args.force)
     progress(f"wrote {out}")
     print(summary)
     return 0
@@ -55,24 +62,26 @@ def command(args, parser) -> int:
 # ---------------------------------------------------------------------------------------------
 
 
-def run_experiment(exp, rd, progress) -> str:
+def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
     """Carry out an experiment into a [`hdjax.report.ResultDir`][]; returns a text summary."""
     import numpy as np
 
     from ..config import _pipeline as P, build_dataset, dumps_toml, save_model
+    from ..config._preflight import check_angles
     from ..report import environment
 
     t_start = time.perf_counter()
     cfg = exp
     seed = cfg["experiment"]["seed"]
     ds = build_dataset(exp, progress)
+    check_angles(ds, force=force, warn=progress.warn)
     joint = ds.joint
     rated = joint.rated_torque
     outputs = cfg["outputs"]
     metrics: dict = {
         "experiment": cfg["experiment"]["name"],
         "environment": environment(seed),
-        "data": {"provenance": ds.provenance, "n_train": ds.n_train},
+        "data": {"provenance": ds.provenance, "n_train": ds.n_train, "reference": ds.reference},
     }
 
     # -- the model-based method --------------------------------------------------------------
@@ -130,7 +139,7 @@ def run_experiment(exp, rd, progress) -> str:
             "scenarios": P.metrics_of(est_n, ds.test, rated),
         }
         if outputs["timing"]:
-            from ..network import estimate_torque as net_estimate
+            from ..network import predict_torque as net_estimate
 
             metrics["network"]["timing"] = P.time_per_100(
                 lambda r: net_estimate(net, r, joint), first_test, outputs["timing_repeats"]

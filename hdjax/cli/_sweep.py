@@ -35,7 +35,12 @@ def add_parser(sub) -> None:
         "'[[10], [10, 10]]' (default: [sweep] values)",
     )
     p.add_argument("--out", help="result directory (default runs/NAME-sweep-SETTING)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing result directory")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier hdjax result at --out (never any other folder, an input or the "
+        "current directory)",
+    )
     p.add_argument(
         "--fresh",
         action="store_true",
@@ -79,10 +84,12 @@ def command(args, parser) -> int:
     progress = Progress(args.quiet)
     exp = load_experiment(args.config, parse_overrides(args.set))
     setting = check_sweep_setting(args.setting or exp["sweep"]["setting"], where="--setting")
-    values = parse_values(args.values) if args.values else list(exp["sweep"]["values"])
+    values = parse_values(args.values) if args.values is not None else list(exp["sweep"]["values"])
     name = exp["experiment"]["name"]
     out = Path(args.out) if args.out else Path("runs") / f"{name}-sweep-{setting.replace('.', '-')}"
-    summary = run_sweep(exp, setting, values, out, args.overwrite, progress, fresh=args.fresh)
+    summary = run_sweep(
+        exp, setting, values, out, args.overwrite, progress, fresh=args.fresh, force=args.force
+    )
     print(summary)
     return 0
 
@@ -102,20 +109,56 @@ def _member_file(i: int, value) -> str:
 
 
 def run_sweep(
-    exp, setting: str, values: list, out: Path, overwrite: bool, progress, *, fresh=False
+    exp,
+    setting: str,
+    values: list,
+    out: Path,
+    overwrite: bool,
+    progress,
+    *,
+    fresh=False,
+    force=False,
 ):
     """Run a sweep into `out` (atomically, resumable); returns a text summary."""
-    import numpy as np
-
     from .._errors import ConfigError
-    from ..config import apply_setting, build_dataset, dumps_toml
-    from ..report import ResultDir, environment, find_knee, markdown_table, sweep_figure
+    from ..config import apply_setting, preflight
+    from ..report import ResultDir
 
-    cfgs = [apply_setting(dict(exp), setting, v, where=f"sweep value {v!r}") for v in values]
+    cfgs = [apply_setting(dict(exp), setting, v, where="sweep member") for v in values]
     if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
         raise ConfigError(f"sweep values repeat: {values}")
+    for v, c in zip(values, cfgs):  # every member is checked before the first one runs
+        preflight(c, base_dir=exp.base_dir, where=f"sweep member {setting} = {v!r}")
     staging = out.parent / f"{out.name}.partial"
-    rd = ResultDir(out, overwrite=overwrite, staging=staging, keep_staging_on_error=True)
+    from ._common import experiment_inputs
+
+    inputs = experiment_inputs(exp)
+    for c in cfgs:
+        inputs += experiment_inputs(_with_path(c, exp))
+    rd = ResultDir(
+        out,
+        overwrite=overwrite,
+        inputs=inputs,
+        staging=staging,
+        keep_staging_on_error=True,
+        command="sweep",
+    )
+    try:
+        summary_rows = _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force)
+    except BaseException:
+        rd.abort()  # keeps finished members for resuming; an empty staging folder goes
+        raise
+    progress(f"wrote {out}")
+    return summary_rows
+
+
+def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force):
+    import numpy as np
+
+    from ..config import build_dataset, dumps_toml
+    from ..config._preflight import check_angles
+    from ..report import environment, find_knee, markdown_table, sweep_figure
+
     fp = _fingerprint(dict(exp), setting)
     cached: dict[int, dict] = {}
     for i, v in enumerate(values):
@@ -139,16 +182,19 @@ def run_sweep(
             for i in todo:
                 progress(f"member {i + 1}/{len(values)}: {setting} = {values[i]!r}")
                 ds = build_dataset(_with_path(cfgs[i], exp), progress)
+                check_angles(ds, force=force, warn=progress.warn)
                 results[i] = _member_loop(cfgs[i], ds, method, exp["experiment"]["seed"])
                 _save_member(rd, i, values[i], fp, results[i])
         else:
             ds = build_dataset(exp, progress)
+            check_angles(ds, force=force, warn=progress.warn)
             nested = (
                 setting in NESTED
                 and all(
                     isinstance(values[i], int) and not isinstance(values[i], bool) for i in todo
                 )
                 and not (setting == "model.fourier_order" and exp["model"]["kinematic"] != "paper")
+                and not exp["fit"]["chunk"]  # streamed: each member by its own chunked fit
             )
             if nested:
                 results, shared = _members_nested(exp, setting, values, todo, cfgs, ds, progress)
@@ -229,7 +275,6 @@ def run_sweep(
     )
     rd.write_json("metrics.json", metrics)
     rd.commit()
-    progress(f"wrote {out}")
     f = lambda v: f"{v:.4g}" if isinstance(v, float) and np.isfinite(v) else "n/a"
     text = [f"{setting:>24}  {'held-out RMS':>14}  {'fit s':>8}"]
     for v, r in zip(values, rows):

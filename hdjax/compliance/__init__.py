@@ -1,5 +1,20 @@
 """The Song et al. (2019) compliance model: structure, calibration and torque inversion."""
 
+from ..effects import (
+    Backlash as Backlash,
+    Column as Column,
+    ColumnTimesTorque as ColumnTimesTorque,
+    Constant as Constant,
+    Coulomb as Coulomb,
+    CurrentPolynomial as CurrentPolynomial,
+    Harmonics as Harmonics,
+    Hysteresis as Hysteresis,
+    PaperFourier as PaperFourier,
+    Stiffening as Stiffening,
+    TwistRate as TwistRate,
+    Viscous as Viscous,
+    dahl_state as dahl_state,
+)
 from ._inversion import (
     SingleEstimate as SingleEstimate,
     TorqueEstimate as TorqueEstimate,
@@ -24,18 +39,9 @@ from ._rls import (
 )
 from ._segments import merge_sparse_segments as merge_sparse_segments
 from ._signals import Signals as Signals, signals_from_recording as signals_from_recording
-from ._terms import (
-    Backlash as Backlash,
-    Column as Column,
-    ColumnTimesTorque as ColumnTimesTorque,
-    Constant as Constant,
-    Coulomb as Coulomb,
-    CurrentPolynomial as CurrentPolynomial,
-    Harmonics as Harmonics,
-    Hysteresis as Hysteresis,
-    PaperFourier as PaperFourier,
-    Stiffening as Stiffening,
-    TwistRate as TwistRate,
-    Viscous as Viscous,
-    dahl_state as dahl_state,
+from ._stream import NormalEquations as NormalEquations, StreamingQR as StreamingQR
+from ._stream_fit import (
+    RecordingStream as RecordingStream,
+    calibrate_stream as calibrate_stream,
 )
+from ._terms import term_from_dict as term_from_dict, term_to_dict as term_to_dict

@@ -40,11 +40,12 @@ import numpy as np
 
 from .._custom_types import Array, Bool, Float, Int
 from .._errors import InversionError
+from .._features import signals
 from .._recording import Recording
+from ..effects import SEGMENT_START
 from ._lstsq import check_invertible
 from ._model import ComplianceModel
-from ._signals import Signals, signals_from_recording
-from ._terms import SEGMENT_START
+from ._signals import Signals
 
 EDGE_TOLERANCE = 1e-9
 """A candidate counts as inside its segment up to this fraction of the rated torque."""
@@ -291,7 +292,7 @@ def estimate_torque(model: ComplianceModel, data) -> TorqueEstimate:
     """
     _check_estimable(model)
     if isinstance(data, Recording):
-        data = signals_from_recording(data, model.ratio, model.twist_sign, velocity=model.velocity)
+        data = signals(data, model.joint, velocity=model.velocity)
     missing = [
         name
         for term in model.base_terms + model.effect_terms

@@ -29,9 +29,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import CalibrationError, DataError, InversionError
+from .._features import signals
 from .._recording import Recording
 from ._model import ComplianceModel
-from ._signals import Signals, signals_from_recording
+from ._signals import Signals
 
 RANK_RTOL = 1e-10
 """Singular values of the scaled design below `RANK_RTOL * max` count as zero."""
@@ -71,7 +72,7 @@ def prepare(model: ComplianceModel, data) -> tuple[Signals, jax.Array]:
                 f"{data.source}: calibration needs a reference 'torque' column (a torque sensor "
                 "or another reference); the recording has none"
             )
-        sig = signals_from_recording(data, model.ratio, model.twist_sign, velocity=model.velocity)
+        sig = signals(data, model.joint, velocity=model.velocity)
         return sig, data.torque
     if isinstance(data, tuple) and len(data) == 2 and isinstance(data[0], Signals):
         return data[0], jnp.asarray(data[1], jnp.float64)
@@ -205,9 +206,15 @@ def select_active(model: ComplianceModel, A: np.ndarray, torque: np.ndarray):
 
 
 def _select_active(model: ComplianceModel, nonzero: np.ndarray, torque: np.ndarray):
-    n_seg = model.n_segments
     seg = np.searchsorted(np.asarray(model.knots), torque, side="right")
-    counts = tuple(int(c) for c in np.bincount(seg, minlength=n_seg))
+    return select_active_counts(model, nonzero, np.bincount(seg, minlength=model.n_segments))
+
+
+def select_active_counts(model: ComplianceModel, nonzero: np.ndarray, counts):
+    """[`select_active`][] from which columns are non-zero and the samples per segment (what a
+    streaming fit accumulates); returns `(active, counts, dropped)`."""
+    n_seg = model.n_segments
+    counts = tuple(int(c) for c in counts)
     active = np.array(nonzero, dtype=bool)
     dropped = []
     names = model.term_names
@@ -314,9 +321,17 @@ def calibrate_lstsq(model: ComplianceModel, data, *, throw: bool = True) -> Cali
 
 def _qr_solve(model, sig, torque, active, messages, throw):
     """Scaled Householder QR on the dense design: rank, condition and (if full rank) solution."""
-    p = int(active.sum())
     A = _design(model, sig, torque)
     qtb, r, scale = _scaled_qr(A, sig.twist, jnp.asarray(active))
+    return solve_from_r(
+        model, np.asarray(r), np.asarray(qtb), np.asarray(scale), active, messages, throw
+    )
+
+
+def solve_from_r(model, r, qtb, scale, active, messages, throw):
+    """Rank, condition and solution from the factor `R` of the scaled design and `Q^T b` (the
+    rank decision and the collinear-terms message of [`calibrate_lstsq`][])."""
+    p = int(active.sum())
     r_np = np.asarray(r)[np.ix_(active, active)]
     s = np.linalg.svd(r_np, compute_uv=False)
     rank = int((s > RANK_RTOL * s[0]).sum())

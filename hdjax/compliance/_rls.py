@@ -99,7 +99,8 @@ def _r_factor(a):
 def rls_solve(a, b, *, block_size: int = 1, forgetting: float = 1.0, init_samples=None):
     """Recursive least squares over all rows of `a` (in order).
 
-    The first `init_samples` rows (default `2 * p`) initialise by eq. (18); the rest are
+    The first `init_samples` rows initialise by eq. (18) (default: the shortest prefix of
+    `2 * p`, `4 * p`, ... rows that determines all `p` coefficients); the rest are
     processed in blocks of `block_size` rows (a last, shorter block included).
 
     **Returns:** the final [`RLSState`][] and the estimate after each block.
@@ -112,11 +113,18 @@ def rls_solve(a, b, *, block_size: int = 1, forgetting: float = 1.0, init_sample
         raise ConfigError(f"block_size must be a positive integer, got {block_size!r}")
     if not 0.0 < forgetting <= 1.0:
         raise ConfigError(f"forgetting factor must lie in (0, 1], got {forgetting}")
-    n0 = 2 * p if init_samples is None else int(init_samples)
+    full_rank = lambda m: (lambda d: d.min() > 1e-10 * d.max())(np.abs(np.diag(_r_factor(a[:m]))))
+    if init_samples is None:
+        # the shortest prefix (2p rows, doubling) that determines every coefficient: a slow
+        # recording's first 2p samples often cover one torque segment only
+        n0 = min(2 * p, n)
+        while n0 < n and not full_rank(n0):
+            n0 = min(2 * n0, n)
+    else:
+        n0 = int(init_samples)
     if n0 < p or n0 > n:
         raise ConfigError(f"init_samples must lie in [{p}, {n}], got {n0}")
-    d = np.abs(np.diag(_r_factor(a[:n0])))
-    if not d.min() > 1e-10 * d.max():
+    if not full_rank(n0):
         raise CalibrationError(
             f"the first {n0} rows do not determine all {p} coefficients (rank-deficient initial "
             "block, eq. (18)); raise init_samples so the first block covers every torque "

@@ -5,6 +5,8 @@
 - [`hdjax.config.build_dataset`][]: the calibration and test recordings of an experiment
   (plant scenarios, files through a column map, or synthetic).
 - [`hdjax.config.save_model`][] / [`hdjax.config.load_model`][]: a calibrated model in one file.
+- [`hdjax.config.preflight`][]: the checks of a resolved config (or one `--set` or sweep member)
+  before any work: the model can be built, the data fits in memory.
 - `hdjax.config.SCHEMA`: every table and key, with defaults.
 """
 
@@ -22,6 +24,7 @@ from ._load import (
     parse_toml as parse_toml,
     parse_value as parse_value,
 )
+from ._preflight import check_memory as check_memory, preflight as preflight
 from ._saved_model import (
     FORMAT_VERSION as FORMAT_VERSION,
     SavedModel as SavedModel,

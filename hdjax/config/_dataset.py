@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import ConfigError
-from .._io import ColumnMap, load_csv, load_npz
+from .._io import ColumnMap, load_csv, load_npz, load_recording
 from .._joint import Joint
 from .._recording import Recording, make_recording
 from ._schema import joint_of
@@ -36,13 +36,16 @@ class Dataset:
     """Calibration and test recordings of one experiment.
 
     **Fields:** `train` (recordings to calibrate / train on), `test` (name -> recording to
-    score on), `joint` (the [`hdjax.Joint`][]) and `provenance` (one line per recording).
+    score on), `joint` (the [`hdjax.Joint`][]), `provenance` (one line per recording) and
+    `reference` (which reference torque was used: `kind`, `description`, and for a wrench
+    reference its holds and sensor offset per file).
     """
 
     train: list[Recording]
     test: dict[str, Recording]
     joint: Joint
     provenance: list[str]
+    reference: dict = dataclasses.field(default_factory=lambda: {"kind": "column"})
 
     @property
     def n_train(self) -> int:
@@ -71,6 +74,14 @@ def build_dataset(exp, progress=None) -> Dataset:
         ds = _from_plant(exp, joint, say)
     if data["settle"] > 0:
         ds = _drop_settling(ds, data["settle"])
+    if data["reference"]["kind"] == "column":
+        from ..reference import describe_column_reference
+
+        ds.reference = {
+            "kind": "column",
+            "description": describe_column_reference(data["columns"], data["kind"]),
+        }
+        ds.provenance.append(ds.reference["description"])
     return ds
 
 
@@ -93,6 +104,7 @@ def _drop_settling(ds: Dataset, settle: float) -> Dataset:
         test={k: cut(r) for k, r in ds.test.items()},
         joint=ds.joint,
         provenance=ds.provenance + [note],
+        reference=ds.reference,
     )
 
 
@@ -105,6 +117,8 @@ def column_map(data: dict) -> ColumnMap:
     table = {"columns": data.get("columns") or {}}
     if data.get("extras"):
         table["extras"] = data["extras"]
+    if data.get("encoding") not in (None, "utf-8"):
+        table["encoding"] = data["encoding"]
     return ColumnMap.from_dict(table, where="[data]")
 
 
@@ -113,22 +127,32 @@ def resolve_path(exp, name: str) -> Path:
     return p if p.is_absolute() else (exp.base_dir / p)
 
 
-def _load(path: Path, fmt: str, cmap: ColumnMap, check_units: bool) -> Recording:
+def _load(path: Path, fmt: str, cmap: ColumnMap, check_units: bool, exp) -> tuple:
+    """The recording at `path` and, for a wrench reference, its report (else `None`)."""
     if fmt == "auto":
-        fmt = "npz" if path.suffix.lower() == ".npz" else "csv"
-    loader = load_npz if fmt == "npz" else load_csv
-    return loader(path, cmap, check_units=check_units)
+        loader = load_recording
+    else:
+        loader = load_npz if fmt == "npz" else load_csv
+    spec = exp["data"]["reference"]
+    if spec["kind"] != "wrench":
+        return loader(path, cmap, check_units=check_units), None
+    from ..reference import load_with_reference
+
+    rec, ref = load_with_reference(
+        path, cmap, spec, loader, base_dir=exp.base_dir, check_units=check_units
+    )
+    return rec, ref.as_dict()
 
 
 def _from_files(exp, joint: Joint, say) -> Dataset:
     data = exp["data"]
     cmap = column_map(data)
-    train, test, prov = [], {}, []
+    train, test, prov, refs = [], {}, [], {}
     split = data["split"]
     for name in data["train"]:
         path = resolve_path(exp, name)
         say(f"loading {path}")
-        rec = _load(path, data["format"], cmap, data["check_units"])
+        rec, refs[str(path)] = _load(path, data["format"], cmap, data["check_units"], exp)
         if split > 0 and not data["test"]:
             a, b = _split(rec, split, data["split_blocks"])
             train.append(a)
@@ -142,7 +166,7 @@ def _from_files(exp, joint: Joint, say) -> Dataset:
     for label, name in items:
         path = resolve_path(exp, name)
         say(f"loading {path}")
-        rec = _load(path, data["format"], cmap, data["check_units"])
+        rec, refs[str(path)] = _load(path, data["format"], cmap, data["check_units"], exp)
         test[_unique(label, test)] = rec
         prov.append(f"{path}: {rec.n_samples} test samples ({label})")
     for rec in train:
@@ -151,6 +175,11 @@ def _from_files(exp, joint: Joint, say) -> Dataset:
                 f"{rec.source}: a calibration recording needs a reference torque column; map "
                 "one in [data.columns] torque = ..."
             )
+    if data["reference"]["kind"] == "wrench":
+        first = next(iter(refs.values()))
+        prov += [f"{p}: {r['description']}" for p, r in refs.items()]
+        reference = {"kind": "wrench", "description": first["description"], "files": refs}
+        return Dataset(train=train, test=test, joint=joint, provenance=prov, reference=reference)
     return Dataset(train=train, test=test, joint=joint, provenance=prov)
 
 
@@ -256,8 +285,8 @@ def synthetic_recording(
     $T / (N K_t)$ plus a friction-like part and 1 % noise; the twist is the five-segment
     flexspline of eq. (7) (knots $\\pm\\tau_0/3, \\pm 2\\tau_0/3$) with the
     paper's k-shape scaled to $k_1 = 1/(6.7\cdot10^4)$ rad/N·m, plus a cubic polynomial in the
-    normalised current ([`SYNTHETIC_POLY`][]), a first-order kinematic error in the paper's form
-    (eq. (9), [`SYNTHETIC_FOURIER`][]) and white noise of `noise_arcsec`.
+    normalised current (`SYNTHETIC_POLY`), a first-order kinematic error in the paper's form
+    (eq. (9), `SYNTHETIC_FOURIER`) and white noise of `noise_arcsec`.
     """
     rng = np.random.default_rng(seed)
     tau0, n_ratio = joint.rated_torque, joint.ratio

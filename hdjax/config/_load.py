@@ -71,7 +71,9 @@ def load_experiment(path, overrides: Mapping[str, object] | None = None) -> Expe
         raise ConfigError(f"{path}: no such experiment file")
     if path.is_dir():
         raise ConfigError(f"{path}: is a directory; give an experiment .toml file")
-    doc = parse_toml(path.read_text(), where=str(path))
+    from .._io import TOML_HINT, read_text
+
+    doc = parse_toml(read_text(path, what="experiment file", hint=TOML_HINT), where=str(path))
     cfg = resolve(doc, where=str(path))
     for setting, value in (overrides or {}).items():
         cfg = apply_setting(cfg, setting, value, where="--set")

@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import ConfigError
+from .._features import Signals, signals
 from .._joint import Joint
 from .._metrics import error_metrics
 from .._recording import Recording
@@ -46,10 +47,19 @@ PAPER_ERRORS = {
 def current_scale(cfg: dict, train: list[Recording]) -> float:
     """The `[model] current_scale`, with `"auto"` = the largest |current| in the training data."""
     value = cfg["model"]["current_scale"]
-    if value != "auto":
-        return float(value)
     peak = max(float(np.max(np.abs(np.asarray(r.current)))) for r in train)
-    return peak if peak > 0 else 1.0
+    if value == "auto":
+        return peak if peak > 0 else 1.0
+    value = float(value)
+    # The polynomial columns are powers of current / scale: a scale far from the data's range
+    # overflows them or makes them vanish, and the fit fails deep inside the solver.
+    if peak > 0 and not 1e-3 <= peak / value <= 1e3:
+        raise ConfigError(
+            f"[model] current_scale = {value:g} A is far from the data's largest |current| "
+            f"({peak:.4g} A): the normalised current would reach {peak / value:.3g}; set "
+            f'current_scale near {peak:.4g} or to "auto"'
+        )
+    return value
 
 
 def build_model(cfg: dict, joint: Joint, scale: float):
@@ -73,27 +83,9 @@ def build_model(cfg: dict, joint: Joint, scale: float):
 
 def stacked_signals(model, recordings: list[Recording]):
     """Signals and reference torque of several recordings, stacked (velocities per recording)."""
-    from ..compliance import Signals, signals_from_recording
-
-    sigs = [
-        signals_from_recording(r, model.ratio, model.twist_sign, velocity=model.velocity)
-        for r in recordings
-    ]
+    sigs = [signals(r, model.joint, velocity=model.velocity) for r in recordings]
     torque = jnp.concatenate([jnp.asarray(r.column("torque")) for r in recordings])
-    if len(sigs) == 1:
-        return sigs[0], torque
-    cat = lambda name: jnp.concatenate([getattr(s, name) for s in sigs])
-    extras = {k: jnp.concatenate([s.extras[k] for s in sigs]) for k in sigs[0].extras}
-    sig = Signals(
-        twist=cat("twist"),
-        current=cat("current"),
-        theta_m=cat("theta_m"),
-        theta_l=cat("theta_l"),
-        omega_m=cat("omega_m"),
-        omega_l=cat("omega_l"),
-        extras=extras,
-    )
-    return sig, torque
+    return Signals.concatenate(sigs), torque
 
 
 def calibrate(cfg: dict, model, train: list[Recording], warn=None):
@@ -103,8 +95,8 @@ def calibrate(cfg: dict, model, train: list[Recording], warn=None):
     """
     from ..compliance import calibrate_lstsq, calibrate_rls
 
-    data = stacked_signals(model, train)
     fit = cfg["fit"]
+    data = None if fit.get("chunk") and fit["method"] == "lstsq" else stacked_signals(model, train)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if fit["method"] == "rls":
@@ -115,6 +107,11 @@ def calibrate(cfg: dict, model, train: list[Recording], warn=None):
                 forgetting=fit["forgetting"],
                 init_samples=fit["init_samples"] or None,
             )
+        elif data is None:
+            from ..compliance import RecordingStream, calibrate_stream
+
+            stream = RecordingStream.from_recordings(train, fit["chunk"])
+            result = calibrate_stream(model, stream, chunk=fit["chunk"], throw=False)
         else:
             result = calibrate_lstsq(model, data, throw=False)
     for w in caught:
@@ -150,7 +147,7 @@ def network_available() -> str:
     try:
         from .. import network  # noqa: F401
 
-        for name in ("Network", "build_features", "train_optax", "estimate_torque"):
+        for name in ("Network", "build_features", "train_optax", "predict_torque"):
             getattr(network, name)
     except (ImportError, AttributeError) as err:
         return f"hdjax.network is not available ({err})"
@@ -226,7 +223,7 @@ def estimate_network(net, joint: Joint, recordings: dict[str, Recording]) -> dic
     """Torque estimates of a trained network on each recording (name -> array)."""
     from .. import network as nw
 
-    return {name: nw.estimate_torque(net, rec, joint) for name, rec in recordings.items()}
+    return {name: nw.predict_torque(net, rec, joint) for name, rec in recordings.items()}
 
 
 # ---------------------------------------------------------------------------------------------

@@ -169,8 +169,10 @@ def load_model(path) -> SavedModel:
     if not path.exists():
         raise DataError(f"{path}: no such model file")
     try:
-        payload = json.loads(path.read_text())
-    except (UnicodeDecodeError, json.JSONDecodeError) as err:
+        if path.is_dir():
+            raise DataError(f"{path}: is a folder; give a model file (model.json)")
+        payload = json.loads(path.read_bytes().decode("utf-8-sig"))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as err:
         raise DataError(
             f"{path}: corrupt model file, not valid JSON ({err}); save the model again"
         ) from None
@@ -202,12 +204,37 @@ def load_model(path) -> SavedModel:
     )
 
 
-def check_compatible(saved: SavedModel, recording: Recording, joint: Joint | None = None) -> None:
+def ratio_mismatch(ratio: float, recording: Recording, *, whose: str = "the joint's") -> str:
+    """Why the recording's angles do not match the gear `ratio` (`""` when they do, or when the
+    output moves too little to tell): the slope of $\theta_m$ against $\theta_l$ must be
+    within 5 % of the ratio (Song et al. eq. (5) with a small twist)."""
+    theta_l = np.asarray(recording.theta_l)
+    theta_m = np.asarray(recording.theta_m)
+    if np.ptp(theta_l) > 0.5 and np.all(np.isfinite(theta_l)) and np.all(np.isfinite(theta_m)):
+        slope = np.polyfit(theta_l, theta_m, 1)[0]
+        if not np.isclose(abs(slope), ratio, rtol=0.05):
+            return (
+                f"{recording.source}: the motor angle moves {abs(slope):.4g} times the output "
+                f"angle but {whose} ratio is {ratio:g}; this data comes from another joint (or "
+                "the angle columns are scaled differently)"
+            )
+    return ""
+
+
+def angle_ratio_mismatch(saved: SavedModel, recording: Recording) -> str:
+    """Why the recording's angles do not match the model's ratio (`""` when they do)."""
+    return ratio_mismatch(saved.joint.ratio, recording, whose="the model's")
+
+
+def check_compatible(
+    saved: SavedModel, recording: Recording, joint: Joint | None = None, *, check_angles=True
+) -> None:
     """Refuse to apply a saved model to data it does not fit.
 
     Checks: the data's joint (if given) has the model's ratio; the data's own angle ratio
     $\\Delta\\theta_m / \\Delta\\theta_l$ (when the output moves enough to tell) matches the
-    model's ratio within 5 %; every extra column the model reads is present.
+    model's ratio within 5 % (skipped with `check_angles=False`, as `hdjax estimate --force`
+    does); every extra column the model reads is present.
 
     **Raises:** [`hdjax.ModelMismatchError`][] saying what differs.
     """
@@ -217,16 +244,9 @@ def check_compatible(saved: SavedModel, recording: Recording, joint: Joint | Non
             f"the model was calibrated for ratio {ratio:g} but the data's joint has ratio "
             f"{joint.ratio:g}; calibrate a model for this joint"
         )
-    theta_l = np.asarray(recording.theta_l)
-    theta_m = np.asarray(recording.theta_m)
-    if np.ptp(theta_l) > 0.5:
-        slope = np.polyfit(theta_l, theta_m, 1)[0]
-        if not np.isclose(abs(slope), ratio, rtol=0.05):
-            raise ModelMismatchError(
-                f"{recording.source}: the motor angle moves {abs(slope):.4g} times the output "
-                f"angle but the model was calibrated for ratio {ratio:g}; this data comes from "
-                "another joint (or the angle columns are scaled differently)"
-            )
+    why = angle_ratio_mismatch(saved, recording) if check_angles else ""
+    if why:
+        raise ModelMismatchError(why)
     missing = [c for c in saved.columns_needed() if c not in recording.extras]
     if missing:
         raise ModelMismatchError(

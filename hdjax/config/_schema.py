@@ -16,6 +16,7 @@ from collections.abc import Callable, Mapping
 from .._errors import ConfigError
 from .._io import did_you_mean
 from .._joint import Joint
+from ..reference._spec import check_reference
 
 Check = Callable[[str, object], object]
 
@@ -91,6 +92,12 @@ def _table(key, v):
     return dict(v)
 
 
+def _encoding(key, v):
+    from .._io import check_encoding
+
+    return check_encoding(v, where=key)
+
+
 def _current_scale(key, v):
     if v == "auto":
         return v
@@ -142,6 +149,9 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "columns": ({}, _table),
         "extras": ({}, _table),
         "check_units": (True, _bool),
+        # the reference torque: a column (default) or built from a wrench ([data.reference])
+        "reference": ({"kind": "column"}, check_reference),
+        "encoding": ("utf-8", _encoding),
         # synthetic (generated from the compliance model itself; no plant needed)
         "n_samples": (20000, _int(100)),
         "noise_arcsec": (1.0, _num(lo=0.0)),
@@ -162,6 +172,9 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "forgetting": (1.0, _num(lo=1e-6, hi=1.0)),
         "block": (256, _int(1)),
         "init_samples": (0, _optional(_int(1))),
+        # > 0: least squares accumulated over chunks of this many samples (memory bounded by
+        # the chunk, not the log); 0: the whole design at once
+        "chunk": (0, _optional(_int(16))),
     },
     "network": {
         "enabled": (True, _bool),
@@ -279,6 +292,23 @@ def _cross_checks(cfg: dict, where: str) -> None:
                 f"{where} [data]: give test files (test = [...]) or a split fraction (e.g. "
                 "split = 0.3 keeps the last 30% of each train file for testing)"
             )
+    if data["reference"]["kind"] == "wrench":
+        if data["kind"] != "files":
+            raise ConfigError(
+                f'{where} [data.reference]: kind = "wrench" needs [data] kind = "files" (a log '
+                "with the wrench and joint-angle columns)"
+            )
+        if "torque" in data["columns"]:
+            raise ConfigError(
+                f'{where} [data.reference]: kind = "wrench" builds the reference torque; remove '
+                "torque from [data.columns]"
+            )
+    if cfg["fit"]["chunk"] and cfg["fit"]["method"] != "lstsq":
+        raise ConfigError(
+            f"{where} [fit]: chunk = {cfg['fit']['chunk']} streams the least-squares fit; "
+            f'method = "{cfg["fit"]["method"]}" already runs block by block (use block = ...) '
+            "or set chunk = 0"
+        )
     sweep = cfg["sweep"]
     check_sweep_setting(sweep["setting"], where=f"{where} [sweep] setting")
 
@@ -296,7 +326,17 @@ def check_sweep_setting(setting: str, *, where: str = "sweep") -> str:
 
 
 def apply_setting(cfg: dict, setting: str, value, *, where: str = "override") -> dict:
-    """A copy of a resolved config with one dotted setting changed and re-validated."""
+    """A copy of a resolved config with one dotted setting changed and re-validated: the value
+    by its key's check, the whole config by the cross-table checks of the file itself."""
+    new = _apply_setting(cfg, setting, value, where=where)
+    try:
+        _cross_checks(new, where=f"{where} {setting} = {value!r}:")
+    except ConfigError as err:
+        raise ConfigError(" ".join(str(err).split())) from None
+    return new
+
+
+def _apply_setting(cfg: dict, setting: str, value, *, where: str) -> dict:
     import copy
 
     new = copy.deepcopy(cfg)

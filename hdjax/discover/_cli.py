@@ -1,8 +1,11 @@
-"""`hdjax discover`: the residual loop from the command line (the contract of issue 6).
+"""`hdjax discover`: the residual loop from the command line.
 
     hdjax discover --train TRAIN.csv --test TEST.csv --joint JOINT.toml --out DIR
 
-Exit code 0 on success; on bad input 2 and a one-line reason on stderr.
+The command shares the parser and the result-folder writer of the other commands
+([`hdjax.report.ResultDir`][]): `--out` appears only when complete, is never an input, and
+`--overwrite` replaces only an earlier hdjax result. Exit code 0 on success; on bad input 2 and
+a one-line reason on stderr.
 """
 
 from __future__ import annotations
@@ -14,9 +17,25 @@ from pathlib import Path
 
 from .._errors import DataError, HdjaxError
 
+HELP = "residual loop: find, trace and add missing effects, report the torque error before/after"
+
+
+def add_parser(sub) -> None:
+    """Register `discover` with the `hdjax` command's sub-parsers."""
+    build_parser(sub.add_parser("discover", help=HELP))
+
+
+def command(args: argparse.Namespace, parser=None) -> int:
+    """The `hdjax discover` handler (the `hdjax` command turns errors into one line)."""
+    return run(args)
+
 
 def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
-    p = parser or argparse.ArgumentParser(prog="hdjax discover")
+    if parser is None:
+        from ..cli._common import Parser
+
+        parser = Parser(prog="hdjax discover")
+    p = parser
     p.description = (
         "Find what a calibrated compliance model gets wrong on TRAIN, name the physical effect, "
         "add it, refit, and report the torque error on TEST before and after. Example: hdjax "
@@ -48,10 +67,15 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
         "--out",
         required=True,
         type=Path,
-        help="output folder (absent or empty unless --overwrite) for report.json, "
-        "report.md and figures/",
+        help="output folder (absent or empty, or an earlier result with --overwrite) for "
+        "report.json, report.md and figures/",
     )
-    p.add_argument("--overwrite", action="store_true", help="replace the files of a previous run")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier hdjax result at --out (never any other folder, an input or the "
+        "current directory)",
+    )
     p.add_argument("--max-effects", type=int, default=5, help="most effects to add (default 5)")
     p.add_argument(
         "--min-gain",
@@ -74,37 +98,53 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
 
 def run(args: argparse.Namespace) -> int:
     """Carry out a parsed `discover` command; raises `HdjaxError` on bad input."""
+    from ..report import ResultDir
+
+    out: Path = args.out
+    if args.max_effects < 0:
+        raise DataError(f"--max-effects must be >= 0, got {args.max_effects}")
+    if not 0.0 < args.min_gain < 1.0:
+        raise DataError(f"--min-gain must lie in (0, 1), got {args.min_gain}")
+    if args.config is not None and (args.train or args.test or args.joint):
+        raise DataError("give either --config or --train/--test/--joint, not both")
+    missing = [f"--{k}" for k in ("train", "test", "joint") if getattr(args, k) is None]
+    if args.config is None and missing:
+        raise DataError(f"missing {', '.join(missing)} (or give --config)")
+    inputs = [args.train, args.test, args.joint, args.config]
+    if args.config is not None:
+        inputs += _config_inputs(args.config)
+    with ResultDir(out, overwrite=args.overwrite, inputs=inputs, command="discover") as rd:
+        return _run_into(rd, args)
+
+
+def _config_inputs(path: Path) -> list[Path]:
+    """The data files a discover config names (for the output rules)."""
+    from .._io import read_toml
+
+    data = read_toml(path).get("data", {})
+    names = [data.get(k) for k in ("path", "train", "test")] if isinstance(data, dict) else []
+    return [path.parent / n for n in names if isinstance(n, str) and n]
+
+
+def _run_into(rd, args: argparse.Namespace) -> int:
     import hdjax
 
     from ._checks import check_inputs
     from ._loop import DiscoverOptions, discover
     from ._report import write_report
 
-    out: Path = args.out
-    if out.exists() and not out.is_dir():
-        raise DataError(f"--out {out} exists and is not a folder")
-    if out.exists() and any(out.iterdir()) and not args.overwrite:
-        raise DataError(f"--out {out} exists and is not empty; pass --overwrite to replace it")
-    if args.max_effects < 0:
-        raise DataError(f"--max-effects must be >= 0, got {args.max_effects}")
-    if not 0.0 < args.min_gain < 1.0:
-        raise DataError(f"--min-gain must lie in (0, 1), got {args.min_gain}")
     cfg_notes, cfg = [], {}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if args.config is not None:
-            if args.train or args.test or args.joint:
-                raise DataError("give either --config or --train/--test/--joint, not both")
             from ._config import load_discover_config
 
             train, test, joint, cfg, cfg_notes = load_discover_config(args.config)
         else:
-            missing = [f"--{k}" for k in ("train", "test", "joint") if getattr(args, k) is None]
-            if missing:
-                raise DataError(f"missing {', '.join(missing)} (or give --config)")
             joint = hdjax.load_joint(args.joint)
             train = hdjax.load_csv(args.train)
             test = hdjax.load_csv(args.test)
+            cfg_notes = ["reference: the 'torque' column of the --train and --test files"]
     say = (lambda s: None) if args.quiet else (lambda s: print(f"[discover] {s}", file=sys.stderr))
     for w in caught:
         say(f"warning: {w.message}")
@@ -131,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
     say("writing report" + ("" if args.no_figures else " and figures"))
     write_report(
         result,
-        out,
+        rd.staging,
         train=train,
         figures=not args.no_figures,
         extra={
@@ -150,10 +190,21 @@ def run(args: argparse.Namespace) -> int:
 
 
 def cli_main(argv: list[str] | None = None) -> int:
-    """Entry point: parse `argv`, run, and turn bad input into one line on stderr, exit 2."""
-    args = build_parser().parse_args(argv)
+    """Entry point: parse `argv`, run, and turn bad input into one line on stderr, exit 2.
+
+    The same as `hdjax discover ...` (`hdjax.cli.main(["discover", ...])`), with the messages
+    prefixed `hdjax discover: error:`.
+    """
+    from ..cli._common import ParserExit, UsageError
+
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     try:
+        args = build_parser().parse_strict(argv)
         return run(args)
-    except HdjaxError as err:
-        print(f"hdjax discover: error: {err}".replace("\n", " "), file=sys.stderr)
+    except ParserExit as done:
+        return done.status
+    except (HdjaxError, UsageError) as err:
+        text = " ".join(str(err).split())
+        text = text.removeprefix("hdjax discover: ")
+        print(f"hdjax discover: error: {text}", file=sys.stderr)
         return 2

@@ -27,10 +27,10 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import ConfigError
-from .._io import ColumnMap, did_you_mean, load_recording, read_toml
+from .._io import ColumnMap, did_you_mean, read_toml
 from .._joint import Joint
 
-_DATA_KEYS = ("path", "train", "test", "test_blocks", "columns", "extras")
+_DATA_KEYS = ("path", "train", "test", "test_blocks", "columns", "extras", "encoding", "reference")
 _DISCOVER_KEYS = (
     "max_effects",
     "min_gain",
@@ -61,14 +61,20 @@ def load_discover_config(path):
         if key not in _DATA_KEYS:
             raise ConfigError(f"{path} [data]: unknown key {key!r}{did_you_mean(key, _DATA_KEYS)}")
     colmap = None
-    if "columns" in data or "extras" in data:
+    if "columns" in data or "extras" in data or "encoding" in data:
         colmap = ColumnMap.from_dict(
-            {k: data[k] for k in ("columns", "extras") if k in data}, where=f"{path} [data]"
+            {k: data[k] for k in ("columns", "extras", "encoding") if k in data},
+            where=f"{path} [data]",
         )
     here = path.parent
     notes = []
+    from ..reference import load_referenced
+
+    ref = data.get("reference")
+    load = lambda p: load_referenced(p, colmap, ref, base_dir=here, where=f"{path} [data]")
     if "path" in data:
-        rec = load_recording(here / data["path"], colmap)
+        rec, described = load(here / data["path"])
+        notes.append(described)
         blocks = data.get("test_blocks", {"block": 100, "every": 4})
         block, every = int(blocks.get("block", 100)), int(blocks.get("every", 4))
         if block < 1 or every < 2:
@@ -79,8 +85,8 @@ def load_discover_config(path):
             f"one log split into TRAIN and TEST: every {every}th block of {block} samples is TEST"
         )
     elif "train" in data and "test" in data:
-        train = load_recording(here / data["train"], colmap)
-        test = load_recording(here / data["test"], colmap)
+        (train, described), (test, _) = load(here / data["train"]), load(here / data["test"])
+        notes.append(described)
     else:
         raise ConfigError(f"{path} [data]: give either 'path' or both 'train' and 'test'")
     options = doc.get("discover", {})

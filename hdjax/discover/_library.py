@@ -1,6 +1,7 @@
 """The library of candidate effects: named groups of twist-model terms.
 
-Each candidate is a term group of [`hdjax.compliance`][] with a key from a fixed vocabulary:
+Each candidate is a term group proposed by a registered effect family ([`hdjax.effects`][]);
+the built-in families give these keys (the report's `vocabulary`, [`hdjax.effects.vocabulary`][]):
 
 - `harmonic:theta_m:K`: $\\cos K\\theta_m, \\sin K\\theta_m$, kinematic error of the wave
   generator side (order $K$, decimal);
@@ -30,95 +31,58 @@ import math
 
 import numpy as np
 
-from ..compliance import (
-    Backlash,
-    Column,
-    ColumnTimesTorque,
-    Coulomb,
-    Harmonics,
-    Hysteresis,
-    Stiffening,
-    TwistRate,
-    Viscous,
-)
-from ..compliance._terms import _fmt
-from ._hysteresis import TwistHysteresis
+from .. import effects
+from ..effects import Candidate as Candidate, CandidateContext, harmonic_key as harmonic_key
 from ._spectrum import OrderSpectrum, order_power, order_spectrum, refine_peak, spectrum_peaks
 
-FAMILIES = (
-    "harmonic:theta_m",
-    "harmonic:theta_l",
-    "coulomb:omega_m",
-    "coulomb:omega_l",
-    "viscous:omega_m",
-    "viscous:omega_l",
-    "hysteresis:torque",
-    "backlash:torque",
-    "stiffness:torque",
-    "damping:twist_rate",
-    "column",
-)
+FAMILIES = effects.discover_families()
+"""The built-in families the loop can offer (registered families: `effects.discover_families()`)."""
 
 
-@dataclasses.dataclass(frozen=True)
-class Candidate:
-    """One candidate effect: its vocabulary `key`, `family` and the term group it adds."""
+def _library_options_class():
+    fields = [
+        (name, type(default), dataclasses.field(default=default))
+        for name, default in effects.library_options().items()
+    ]
+    fields.append(
+        (
+            "families",
+            tuple,
+            dataclasses.field(default_factory=lambda: effects.discover_families()),
+        )
+    )
+    doc = (
+        "Which candidate effects to offer, and their grids.\n\n"
+        "The fields are the registered families' options (see each family in `hdjax.effects`):\n\n"
+        "- `orders_m`, `orders_l`: (min, max) trial orders of the motor and output angles.\n"
+        "- `integer_orders_m`, `integer_orders_l`: grid orders always offered (if resolvable).\n"
+        "- `n_peaks`: spectrum peaks taken per angle.\n"
+        "- `smoothing_fractions`: $\\omega_s$ grid as fractions of the velocity's RMS.\n"
+        "- `dahl_fractions`, `backlash_fractions`: Dahl scale and backlash width as fractions of\n"
+        "  $\\tau_0$.\n"
+        "- `families`: the families to offer (default all registered ones).\n"
+    )
+    cls = dataclasses.make_dataclass("LibraryOptions", fields, frozen=True)
+    cls.__doc__ = doc
+    cls.__module__ = __name__
+    return cls
 
-    key: str
-    family: str
-    term: object
-    origin: str = "grid"
 
-
-@dataclasses.dataclass(frozen=True)
-class LibraryOptions:
-    """Which candidate effects to offer, and their grids.
-
-    - `orders_m`, `orders_l`: (min, max) trial orders of the motor and output angles.
-    - `integer_orders_m`, `integer_orders_l`: grid orders always offered (if resolvable).
-    - `n_peaks`: spectrum peaks taken per angle.
-    - `smoothing_fractions`: $\\omega_s$ grid as fractions of the velocity's RMS.
-    - `dahl_fractions`, `backlash_fractions`: Dahl scale and backlash width as fractions of
-      $\\tau_0$.
-    - `families`: the families to offer (default all).
-    """
-
-    orders_m: tuple[float, float] = (0.5, 8.0)
-    orders_l: tuple[float, float] = (0.5, 12.0)
-    integer_orders_m: tuple[float, ...] = (1.0, 2.0, 3.0, 4.0)
-    integer_orders_l: tuple[float, ...] = (1.0, 2.0, 3.0, 4.0)
-    n_peaks: int = 3
-    smoothing_fractions: tuple[float, ...] = (0.003, 0.01, 0.03, 0.1, 0.3)
-    dahl_fractions: tuple[float, ...] = (0.01, 0.025, 0.05, 0.1, 0.2)
-    backlash_fractions: tuple[float, ...] = (0.005, 0.01, 0.02, 0.05)
-    families: tuple[str, ...] = FAMILIES
+LibraryOptions = _library_options_class()
+"""Which candidate effects to offer, and their grids: one field per registered family option
+(a family registered later reads its own defaults), plus `families`."""
 
 
 def candidate_columns(term, sig, torque) -> np.ndarray:
-    """A candidate's columns as a NumPy array, computed in NumPy where the term is simple.
+    """A candidate's columns as a NumPy array, computed in NumPy where the term allows it.
 
     Scoring evaluates dozens of candidates once each; NumPy avoids compiling a JAX program per
-    candidate (their orders and scales are static fields). The result equals `term.columns`.
+    candidate (their orders and scales are static fields). The result equals `term.columns`
+    (each term's `numpy_columns` is tested against it).
     """
-    name = type(term).__name__
-    if name == "Harmonics":
-        th = np.asarray(sig.get(term.signal))
-        return np.column_stack([f(k * th) for k in term.orders for f in (np.cos, np.sin)])
-    if name == "Coulomb":
-        return np.tanh(np.asarray(sig.get(term.signal)) / term.omega_s)[:, None]
-    if name == "Viscous":
-        return (np.asarray(sig.get(term.signal)) / term.scale)[:, None]
-    if name == "Column":
-        return ((np.asarray(sig.get(term.name)) - term.center) / term.scale)[:, None]
-    if name == "Backlash":
-        return np.tanh(np.asarray(torque) / term.width)[:, None]
-    if name == "Stiffening":
-        return ((np.asarray(torque) / term.torque_scale) ** 3)[:, None]
+    if term.score_in_numpy:
+        return np.asarray(term.numpy_columns(sig, torque))
     return np.asarray(term.columns(sig, torque))
-
-
-def harmonic_key(signal: str, order: float) -> str:
-    return f"harmonic:{signal}:{_fmt(round(order, 6))}"
 
 
 def min_resolvable_order(theta) -> float:
@@ -127,25 +91,22 @@ def min_resolvable_order(theta) -> float:
     return math.inf if span <= 0 else 2.0 * math.pi / span
 
 
-def _named_orders(grid: tuple[float, ...], ratio: float, signal: str) -> list[float]:
-    named = list(grid)
-    if signal == "theta_m":
-        named += [2.0 - 2.0 / ratio, 2.0 + 2.0 / ratio, 1.0 - 1.0 / ratio, 1.0 + 1.0 / ratio]
-    return named
-
-
-def harmonic_candidates(
-    signal: str,
+def spectrum_orders(
     theta,
     residual,
     *,
-    ratio: float,
+    signal: str,
     order_range: tuple[float, float],
-    grid: tuple[float, ...],
-    n_peaks: int,
+    named: list[float],
     existing: list[float],
-) -> tuple[list[Candidate], OrderSpectrum | None]:
-    """Harmonic candidates of one angle: spectrum peaks (refined) plus named orders."""
+    n_peaks: int,
+) -> tuple[list[tuple[float, str]], OrderSpectrum | None]:
+    """Orders to try for one angle: spectrum peaks (refined) plus the named orders it resolves.
+
+    Orders within half a resolution of one already in the model (`existing`) are left out.
+    Returns `[(order, origin)]` (origin `"spectrum"` or `"grid"`) and the spectrum (None when
+    the record resolves no order in the range).
+    """
     lowest = max(order_range[0], min_resolvable_order(theta))
     if lowest >= order_range[1]:
         return [], None
@@ -153,7 +114,7 @@ def harmonic_candidates(
         theta, residual, signal=signal, min_order=lowest, max_order=order_range[1]
     )
     res = spec.resolution
-    named = [k for k in _named_orders(grid, ratio, signal) if lowest <= k <= order_range[1]]
+    named = [k for k in named if lowest <= k <= order_range[1]]
     orders: list[tuple[float, str]] = []
     for k, _ in spectrum_peaks(spec, n_peaks=n_peaks):
         k = refine_peak(theta, residual, k, res)
@@ -174,8 +135,7 @@ def harmonic_candidates(
         if any(abs(k - s) < 1e-6 for s in seen):
             continue
         seen.append(k)
-        term = Harmonics(signal=signal, orders=(float(round(k, 6)),))
-        out.append(Candidate(harmonic_key(signal, k), f"harmonic:{signal}", term, origin))
+        out.append((k, origin))
     return out, spec
 
 
@@ -188,89 +148,51 @@ def build_library(
     rated_torque: float,
     existing_keys: tuple[str, ...],
     existing_terms: tuple = (),
-    options: LibraryOptions = LibraryOptions(),
+    options=None,
     extra_columns: tuple[str, ...] = (),
     twist_sign: float = 1.0,
-    compliance: float | None = None,
 ) -> tuple[list[Candidate], dict[str, OrderSpectrum]]:
     """All candidate effects for the present residual, and the order spectra used.
 
+    Asks every registered family ([`hdjax.effects.families`][]) for its candidates.
+
     **Arguments:** `sig` (training [`hdjax.compliance.Signals`][]), `torque` (reference),
     `residual` (twist residual of the present model), `existing_keys` (effects already in the
-    model, not offered again), `extra_columns` (names of usable extra columns).
+    model, not offered again), `options` ([`LibraryOptions`][], default all families),
+    `extra_columns` (names of usable extra columns).
     """
-    fams = set(options.families)
-    cands: list[Candidate] = []
+    options = LibraryOptions() if options is None else options
     spectra: dict[str, OrderSpectrum] = {}
-    existing_orders = {"theta_m": [], "theta_l": []}
-    for term in existing_terms:
-        if isinstance(term, Harmonics):
-            existing_orders[term.signal] += list(term.orders)
-    for signal, rng, grid in (
-        ("theta_m", options.orders_m, options.integer_orders_m),
-        ("theta_l", options.orders_l, options.integer_orders_l),
-    ):
-        if f"harmonic:{signal}" not in fams:
-            continue
-        c, spec = harmonic_candidates(
-            signal,
+
+    def _spectrum_orders(signal, order_range, named, existing, n_peaks):
+        orders, spec = spectrum_orders(
             sig.get(signal),
             residual,
-            ratio=ratio,
-            order_range=rng,
-            grid=grid,
-            n_peaks=options.n_peaks,
-            existing=existing_orders[signal],
+            signal=signal,
+            order_range=order_range,
+            named=named,
+            existing=existing,
+            n_peaks=n_peaks,
         )
-        cands += c
         if spec is not None:
             spectra[signal] = spec
-    for signal in ("omega_m", "omega_l"):
-        w = np.asarray(sig.get(signal))
-        rms = float(np.sqrt(np.mean(w**2)))
-        if rms == 0.0:
-            continue
-        if f"coulomb:{signal}" in fams and f"coulomb:{signal}" not in existing_keys:
-            for frac in options.smoothing_fractions:
-                term = Coulomb(signal=signal, omega_s=float(f"{frac * rms:.4g}"))
-                cands.append(Candidate(term.key, term.key, term))
-        if f"viscous:{signal}" in fams and f"viscous:{signal}" not in existing_keys:
-            term = Viscous(signal=signal, scale=float(f"{rms:.4g}"))
-            cands.append(Candidate(term.key, term.key, term))
-    if "hysteresis:torque" in fams and "hysteresis:torque" not in existing_keys:
-        for frac in options.dahl_fractions:
-            # with the model's compliance, the state follows the measured deformation
-            # (hdjax/discover/_hysteresis.py); without it, the torque path
-            term = (
-                Hysteresis(torque_scale=frac * rated_torque)
-                if compliance is None
-                else TwistHysteresis(torque_scale=frac * rated_torque, compliance=compliance)
-            )
-            cands.append(Candidate(term.key, term.key, term))
-    if "backlash:torque" in fams and "backlash:torque" not in existing_keys:
-        for frac in options.backlash_fractions:
-            term = Backlash(width=frac * rated_torque)
-            cands.append(Candidate(term.key, term.key, term))
-    if "stiffness:torque" in fams and "stiffness:torque" not in existing_keys:
-        term = Stiffening(torque_scale=float(rated_torque))
-        cands.append(Candidate(term.key, term.key, term))
-    if "damping:twist_rate" in fams and "damping:twist_rate" not in existing_keys:
-        rate = np.asarray(sig.omega_l) - np.asarray(sig.omega_m) / ratio
-        rms = float(np.sqrt(np.mean(rate**2)))
-        if rms > 0.0:
-            term = TwistRate(ratio=float(ratio), sign=float(twist_sign), scale=float(f"{rms:.4g}"))
-            cands.append(Candidate(term.key, term.key, term))
-    if "column" in fams:
-        for name in extra_columns:
-            x = np.asarray(sig.get(name))
-            center, scale = float(f"{x.mean():.6g}"), float(f"{x.std():.4g}")
-            if scale == 0.0:
-                continue
-            t1 = Column(name=name, center=center, scale=scale)
-            t2 = ColumnTimesTorque(
-                name=name, center=center, scale=scale, torque_scale=float(rated_torque)
-            )
-            for term in (t1, t2):
-                if term.key not in existing_keys:
-                    cands.append(Candidate(term.key, "column", term))
+        return orders
+
+    ctx = CandidateContext(
+        sig=sig,
+        torque=torque,
+        residual=residual,
+        ratio=ratio,
+        rated_torque=rated_torque,
+        twist_sign=twist_sign,
+        existing_keys=tuple(existing_keys),
+        existing_terms=tuple(existing_terms),
+        extra_columns=tuple(extra_columns),
+        families=frozenset(options.families),
+        options=options,
+        spectrum_orders=_spectrum_orders,
+    )
+    cands: list[Candidate] = []
+    for family in effects.families():
+        cands += family.candidates(ctx)
     return cands, spectra

@@ -86,7 +86,7 @@ class DiscoverOptions:
     n_folds: int = 5
     block: int = 200
     sindy_threshold: float = 0.02
-    library: LibraryOptions = LibraryOptions()
+    library: LibraryOptions = dataclasses.field(default_factory=LibraryOptions)
     n_segments: int = 5
     poly_order: int = 6
     fourier_order: int = 3
@@ -293,7 +293,6 @@ def score_candidates(
         options=options.library,
         extra_columns=extra_columns,
         twist_sign=model.twist_sign,
-        compliance=small_torque_compliance(model),
     )
     if not cands:
         return [], spectra, resid
@@ -327,12 +326,6 @@ def score_candidates(
         for j, (i, (gain, folds_)) in enumerate(zip(usable, gains))
     ]
     return scored, spectra, resid
-
-
-def small_torque_compliance(model: ComplianceModel) -> float:
-    """The compliance of the segment holding 0 N·m, rounded (a static term field)."""
-    j = int(np.searchsorted(np.asarray(model.knots), 0.0, side="right"))
-    return float(f"{float(np.asarray(model.k)[j]):.4g}")
 
 
 def _best_per_key(scored, min_gain):

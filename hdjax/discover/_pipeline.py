@@ -28,7 +28,7 @@ from .._recording import Recording
 from ..compliance import ComplianceModel, calibrate_lstsq, signals_from_recording
 from ..compliance._inversion import _estimate
 from ..compliance._lstsq import _design
-from ..compliance._terms import SEGMENT_START, TORQUE_PATH
+from ..effects import SEGMENT_START, TORQUE_PATH
 from ._folds import segment_starts
 
 DRIVER_ROUNDS = 3

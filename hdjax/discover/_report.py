@@ -10,13 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import effects
 from ._loop import ARCSEC, DiscoveryResult, residual_spectra
-
-VOCABULARY = (
-    "harmonic:theta_m:ORDER, harmonic:theta_l:ORDER, coulomb:omega_m, coulomb:omega_l, "
-    "viscous:omega_m, viscous:omega_l, hysteresis:torque, backlash:torque, stiffness:torque, "
-    "damping:twist_rate, column:NAME, column:NAME*torque"
-)
 
 STOPPING_RULE = (
     "a candidate is eligible when pysindy STLSQ selects it and it removes at least min_gain of "
@@ -62,7 +57,7 @@ def report_dict(result: DiscoveryResult, *, extra: dict | None = None) -> dict:
         ],
         "final": {"rms": f.rms, "max": f.max, "rms_pct": f.rms_pct, "max_pct": f.max_pct},
         "effects": result.effects,
-        "vocabulary": VOCABULARY,
+        "vocabulary": effects.vocabulary(),
         "stopping_rule": STOPPING_RULE,
         "last_ranking": result.final_ranking,
         "unexplained": result.unexplained,

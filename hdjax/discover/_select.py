@@ -123,7 +123,7 @@ def cv_gains(basis: FoldBasis, groups: list[np.ndarray]) -> list[tuple[float, np
 
 
 def cv_gain(basis: FoldBasis, cols: np.ndarray) -> tuple[float, np.ndarray]:
-    """[`cv_gains`][] for a single group."""
+    """`cv_gains` for a single group."""
     return cv_gains(basis, [np.atleast_2d(np.asarray(cols).T).T])[0]
 
 

@@ -43,6 +43,7 @@ import jax
 import jax.numpy as jnp
 
 from .._custom_types import Array, Float
+from ..effects import WG_COMPLIANCE, in_slot
 from ._params import PlantParams
 
 _f64 = lambda x: jnp.asarray(x, jnp.float64)
@@ -93,14 +94,14 @@ def reciprocals(params: PlantParams) -> dict:
         "effects": {name: eff.reciprocals() for name, eff in params.effects.items()},
         **(
             {"series": 1.0 / (params.compliance + _wg_linear(params))}
-            if params.has("wg_compliance")
+            if params.has(WG_COMPLIANCE)
             else {}
         ),
     }
 
 
 def _wg_linear(params):
-    return params.effects["wg_compliance"].coefficients[0] / (params.ratio * params.ratio)
+    return params.effects[WG_COMPLIANCE].coefficients[0] / (params.ratio * params.ratio)
 
 
 def _inv(params, inv):
@@ -109,6 +110,19 @@ def _inv(params, inv):
 
 def _eff(params, inv, name):
     return params.effects[name], inv["effects"][name]
+
+
+def _slot(params, slot: str) -> tuple[str, ...]:
+    """The switched-on effects that enter the joint in `slot` (see `hdjax.effects.PLANT_SLOTS`),
+    in registration order; resolved in Python at trace time, so the traced program is the same
+    as with the names written out."""
+    return in_slot(params.effects, slot)
+
+
+def _one(params, slot: str):
+    """The name of the one switched-on effect in a single-effect slot, or None."""
+    names = _slot(params, slot)
+    return names[0] if names else None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -208,16 +222,17 @@ def _inverse_and_stiffness(params, d, scale, extra, inv):
 
 
 def _needs_newton(params: PlantParams) -> bool:
-    if params.flexspline == "smooth" or params.has("backlash"):
+    if params.flexspline == "smooth" or _slot(params, "compliance"):
         return True
-    return params.has("wg_compliance") and params.effects["wg_compliance"].coefficients.shape[0] > 1
+    return params.has(WG_COMPLIANCE) and params.effects[WG_COMPLIANCE].coefficients.shape[0] > 1
 
 
 def _thermal(params: PlantParams, temperature):
     """(compliance factor, temperature rise) of the `temperature` effect, or (1.0, 0.0)."""
-    if not params.has("temperature"):
+    name = _one(params, "temperature")
+    if name is None:
         return 1.0, 0.0
-    eff = params.effects["temperature"]
+    eff = params.effects[name]
     dtemp = temperature - eff.reference
     return 1.0 + eff.alpha * dtemp, dtemp
 
@@ -231,11 +246,11 @@ def compliance_deflection(params: PlantParams, torque, temperature, *, inv=None)
     inv = _inv(params, inv)
     scale, _ = _thermal(params, temperature)
     g = scale * flexspline_deflection(params, torque, inv=inv)
-    if params.has("wg_compliance"):
-        wg = params.effects["wg_compliance"]
+    if params.has(WG_COMPLIANCE):
+        wg = params.effects[WG_COMPLIANCE]
         g = g + wg.deflection(torque * inv["ratio"]) * inv["ratio"]
-    if params.has("backlash"):
-        eff, ie = _eff(params, inv, "backlash")
+    for name in _slot(params, "compliance"):
+        eff, ie = _eff(params, inv, name)
         g = g + eff.deflection(torque, ie)
     return g
 
@@ -243,11 +258,11 @@ def compliance_deflection(params: PlantParams, torque, temperature, *, inv=None)
 def _compliance_slope(params: PlantParams, torque, temperature, inv):
     scale, _ = _thermal(params, temperature)
     g = scale * _flexspline_slope(params, torque, inv)
-    if params.has("wg_compliance"):
-        wg = params.effects["wg_compliance"]
+    if params.has(WG_COMPLIANCE):
+        wg = params.effects[WG_COMPLIANCE]
         g = g + wg.slope(torque * inv["ratio"]) * inv["ratio"] * inv["ratio"]
-    if params.has("backlash"):
-        eff, ie = _eff(params, inv, "backlash")
+    for name in _slot(params, "compliance"):
+        eff, ie = _eff(params, inv, name)
         g = g + eff.slope(torque, ie)
     return g
 
@@ -258,10 +273,10 @@ def kinematic_error(params: PlantParams, theta_m, theta_l):
     Harmonics are of the recorded angles $-\theta_m$, $-\theta_l$ (see the module docstring).
     """
     err = jnp.zeros_like(theta_m)
-    if params.has("harmonic_m"):
-        err = err + params.effects["harmonic_m"](-theta_m)
-    if params.has("harmonic_l"):
-        err = err + params.effects["harmonic_l"](-theta_l)
+    for name in _slot(params, "kinematic_m"):
+        err = err + params.effects[name](-theta_m)
+    for name in _slot(params, "kinematic_l"):
+        err = err + params.effects[name](-theta_l)
     return err
 
 
@@ -270,9 +285,10 @@ def effective_deflection(params: PlantParams, state: PlantState, *, inv=None):
     inv = _inv(params, inv)
     d = state.theta_m * inv["ratio"] - state.theta_l
     d = d - kinematic_error(params, state.theta_m, state.theta_l)
-    if params.has("temperature"):
+    thermal = _one(params, "temperature")
+    if thermal is not None:
         _, dtemp = _thermal(params, state.temperature)
-        d = d - params.effects["temperature"].beta * dtemp
+        d = d - params.effects[thermal].beta * dtemp
     return d
 
 
@@ -288,8 +304,8 @@ def elastic_torque(params: PlantParams, d_eff, temperature, *, inv=None):
     inv = _inv(params, inv)
     scale, _ = _thermal(params, temperature)
     extra = 0.0
-    if params.has("wg_compliance"):
-        extra = params.effects["wg_compliance"].coefficients[0] * inv["ratio"] * inv["ratio"]
+    if params.has(WG_COMPLIANCE):
+        extra = params.effects[WG_COMPLIANCE].coefficients[0] * inv["ratio"] * inv["ratio"]
     torque, _ = _inverse_and_stiffness(params, d_eff, scale, extra, inv)
     if _needs_newton(params):
         for _ in range(params.newton_iterations):
@@ -315,29 +331,28 @@ def flexspline_torque(params: PlantParams, state: PlantState, *, inv=None):
     inv = _inv(params, inv)
     d_eff = effective_deflection(params, state, inv=inv)
     torque = elastic_torque(params, d_eff, state.temperature, inv=inv)
-    if params.has("stiffening"):
-        torque = torque + params.effects["stiffening"].torque(d_eff)
+    for name in _slot(params, "spring"):
+        torque = torque + params.effects[name].torque(d_eff)
     d_dot = state.omega_m * inv["ratio"] - state.omega_l
     return torque + state.z + params.damping * d_dot
 
 
-def _friction(params, inv, names, omega):
+def _friction(params, inv, slot, omega):
     f = jnp.zeros_like(omega)
-    for name in names:
-        if params.has(name):
-            eff, ie = _eff(params, inv, name)
-            f = f + eff(omega, ie)
+    for name in _slot(params, slot):
+        eff, ie = _eff(params, inv, name)
+        f = f + eff(omega, ie)
     return f
 
 
 def motor_friction(params: PlantParams, omega_m, *, inv=None):
     """Motor-side friction $F_m(\\omega_m)$ [N·m] (Coulomb, viscous, Stribeck; each if on)."""
-    return _friction(params, _inv(params, inv), ("coulomb_m", "viscous_m", "stribeck_m"), omega_m)
+    return _friction(params, _inv(params, inv), "motor_friction", omega_m)
 
 
 def output_friction(params: PlantParams, omega_l, *, inv=None):
     """Output-bearing friction $F_l(\\omega_l)$ [N·m] (Coulomb, viscous, Stribeck; each if on)."""
-    return _friction(params, _inv(params, inv), ("coulomb_l", "viscous_l", "stribeck_l"), omega_l)
+    return _friction(params, _inv(params, inv), "output_friction", omega_l)
 
 
 def sensor_torque(params: PlantParams, state: PlantState, *, inv=None):
@@ -386,12 +401,12 @@ def derivatives(
     # hysteresis and temperature
     d_dot = state.omega_m * inv["ratio"] - state.omega_l
     dz = jnp.zeros_like(state.z)
-    if params.has("hysteresis"):
-        eff, ie = _eff(params, inv, "hysteresis")
+    for name in _slot(params, "hysteresis"):
+        eff, ie = _eff(params, inv, name)
         dz = dz + eff.rate(state.z, d_dot, ie)
     dtemp = jnp.zeros_like(state.temperature)
-    if params.has("temperature"):
-        eff, ie = _eff(params, inv, "temperature")
+    for name in _slot(params, "temperature"):
+        eff, ie = _eff(params, inv, name)
         dtemp = dtemp + eff.rate(state.temperature, state.current, ie)
     return PlantState(
         theta_m=state.omega_m,
@@ -455,8 +470,8 @@ def rk4_step(
     # rates are the stage speeds and the current is integrated exactly, both cheap to recompute
     rates = lambda k: (
         (k.omega_m, k.omega_l)
-        + ((k.z,) if params.has("hysteresis") else ())
-        + ((k.temperature,) if params.has("temperature") else ())
+        + ((k.z,) if _slot(params, "hysteresis") else ())
+        + ((k.temperature,) if _slot(params, "temperature") else ())
     )
 
     def f(st):
@@ -483,7 +498,8 @@ def equilibrium_state(
     error depends on $\theta_m$, stiffening and the thermal offset make the map implicit).
     """
     if temperature is None:
-        temperature = params.effects["temperature"].initial if params.has("temperature") else 25.0
+        thermal = _one(params, "temperature")
+        temperature = params.effects[thermal].initial if thermal is not None else 25.0
     temperature = _f64(temperature)
     theta_l = _f64(theta_l)
     t_j = -_f64(load_torque)

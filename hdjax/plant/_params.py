@@ -14,10 +14,11 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .. import effects as _effects_registry
 from .._custom_types import Array, Float
 from .._errors import ConfigError
 from .._io import did_you_mean
-from ._effects import EFFECT_NAMES, _concrete, check_effect_name, make_effect
+from ._effects import _concrete, check_effect_name, make_effect
 
 _f64 = lambda x: jnp.asarray(x, jnp.float64)
 
@@ -124,7 +125,7 @@ class PlantParams(eqx.Module):
     @property
     def effect_names(self) -> tuple[str, ...]:
         """Switched-on effects in registry order."""
-        return tuple(n for n in EFFECT_NAMES if n in self.effects)
+        return tuple(n for n in _effects_registry.plant_effect_names() if n in self.effects)
 
 
 def _k1(params) -> float:

@@ -19,6 +19,7 @@ from .. import _trig
 from .._custom_types import Array, Float
 from .._errors import ConfigError, DivergenceError
 from .._recording import Recording, make_recording
+from ..effects import in_slot
 from ._controller import ControllerGains, default_gains
 from ._dynamics import (
     PlantState,
@@ -257,9 +258,8 @@ def stiffest_modes(params: PlantParams) -> dict[str, complex]:
     m_inv = 1.0 / jl + 1.0 / (n * n * jm)
     k = 1.0 / float(np.min(np.asarray(_concrete(params.compliance))))
     e = params.effects
-    if "hysteresis" in e:
-        h = e["hysteresis"]
-        k += _num(getattr(h, "a", getattr(h, "sigma", getattr(h, "sigma0", 0.0))))
+    for name in in_slot(e, "hysteresis"):
+        k += _num(e[name].initial_stiffness())
     if "stiffening" in e:
         d = _num(
             compliance_deflection(params, 1.2 * params.rated_torque, jnp.asarray(25.0, jnp.float64))
@@ -269,23 +269,13 @@ def stiffest_modes(params: PlantParams) -> dict[str, complex]:
     disc = complex((c * m_inv) ** 2 - 4.0 * k * m_inv)
     lam_joint = (-c * m_inv - disc**0.5) / 2.0
 
-    def slope(names):
-        s = 0.0
-        for nm in names:
-            if nm in e:
-                f = e[nm]
-                if hasattr(f, "coefficient"):
-                    s += _num(f.coefficient)
-                elif hasattr(f, "level"):
-                    s += _num(f.level) / _num(f.smoothing)
-                else:
-                    s += _num(f.peak) / _num(f.smoothing)
-        return s
+    def slope(slot):
+        return sum((_num(e[name].max_slope()) for name in in_slot(e, slot)), 0.0)
 
     return {
         "joint": lam_joint,
-        "motor friction": complex(-slope(("coulomb_m", "viscous_m", "stribeck_m")) / jm),
-        "output friction": complex(-slope(("coulomb_l", "viscous_l", "stribeck_l")) / jl),
+        "motor friction": complex(-slope("motor_friction") / jm),
+        "output friction": complex(-slope("output_friction") / jl),
     }
 
 

@@ -3,7 +3,9 @@
 
 Everything is written into a staging directory beside the target and renamed into place only
 when complete, so a crash never leaves a half-written result that looks complete: either the
-target holds a full result (with `metrics.json`) or it does not exist. A sweep keeps its
+target holds a full result (with `metrics.json`) or it does not exist. The result is stamped
+with a marker file listing its files, and only such a folder is ever replaced (the rules are in
+`hdjax/report/_outputs.py`). A sweep keeps its
 staging directory (`OUT.partial`) after an interruption, so the next run resumes from the
 member results cached there.
 """
@@ -67,30 +69,66 @@ class ResultDir:
     **Arguments:**
 
     - `out`: the final directory.
-    - `overwrite`: replace an existing `out` (otherwise refuse before any work is done).
+    - `overwrite`: replace an existing hdjax result at `out` (otherwise refuse before any work
+      is done). Only a folder hdjax wrote and stamped with its marker file is ever replaced;
+      see [`hdjax.report.check_output_dir`][] for every rule.
+    - `inputs`: the paths the command reads; `out` (and the staging folder) may not be, hold or
+      lie inside any of them.
     - `staging`: the staging directory (default a hidden `.NAME.tmp-PID` beside `out`).
     - `keep_staging_on_error`: leave the staging directory after an exception (for resumable
-      sweeps); by default it is removed.
+      sweeps) when it holds files beyond the marker; by default it is removed.
+    - `command`: the command recorded in the marker.
 
-    Use as a context manager: leaving the block normally commits, an exception aborts.
+    Use as a context manager: leaving the block normally commits, an exception (or SIGINT /
+    SIGTERM) aborts.
 
-    **Raises:** [`hdjax.ConfigError`][] when `out` exists and `overwrite` is false, or is a file.
+    **Raises:** [`hdjax.ConfigError`][] naming `out` and what to do, when the rules refuse it.
     """
 
-    def __init__(self, out, *, overwrite: bool = False, staging=None, keep_staging_on_error=False):
+    def __init__(
+        self,
+        out,
+        *,
+        overwrite: bool = False,
+        inputs=(),
+        staging=None,
+        keep_staging_on_error=False,
+        command: str = "hdjax",
+    ):
+        from ._outputs import MARKER, check_not_input, check_output_dir, marker_bytes, read_marker
+
         self.out = Path(out)
-        if self.out.exists() and not self.out.is_dir():
-            raise ConfigError(f"output {self.out} exists and is not a directory")
-        if self.out.exists() and not overwrite:
-            raise ConfigError(
-                f"output directory {self.out} already exists; choose another --out or pass "
-                "--overwrite to replace it"
-            )
+        self.inputs = tuple(p for p in inputs if p is not None)
+        check_output_dir(self.out, inputs=self.inputs, overwrite=overwrite)
         self.overwrite = overwrite
         self.keep = keep_staging_on_error
+        self.command = command
         default = self.out.parent / f".{self.out.name}.tmp-{os.getpid()}"
         self.staging = Path(staging) if staging is not None else default
-        self.staging.mkdir(parents=True, exist_ok=True)
+        check_not_input(self.staging, self.inputs, flag="the staging folder of --out")
+        if self.staging.is_dir() and any(self.staging.iterdir()):
+            if read_marker(self.staging) is None:
+                raise ConfigError(
+                    f"{self.staging}: the staging folder of --out {self.out} exists and was not "
+                    "written by hdjax; move it away or choose another --out"
+                )
+        elif self.staging.exists() and not self.staging.is_dir():
+            raise ConfigError(
+                f"{self.staging}: the staging folder of --out {self.out} exists as a file; move "
+                "it away or choose another --out"
+            )
+        self._marker = MARKER
+        try:
+            self.staging.mkdir(parents=True, exist_ok=True)
+            if not (self.staging / MARKER).exists():
+                from .._io import atomic_write_bytes
+
+                atomic_write_bytes(self.staging / MARKER, marker_bytes(command, [], staging=True))
+        except OSError as err:
+            raise ConfigError(
+                f"{self.out}: cannot create the result folder there "
+                f"({(err.strerror or str(err)).lower()}: {err.filename}); choose another --out"
+            ) from None
         self.files: list[str] = []
 
     def path(self, rel: str) -> Path:
@@ -100,8 +138,10 @@ class ResultDir:
         return p
 
     def write_bytes(self, rel: str, data: bytes) -> None:
+        from .._interrupts import check
         from .._io import atomic_write_bytes
 
+        check()
         atomic_write_bytes(self.path(rel), data)
         if rel not in self.files:
             self.files.append(rel)
@@ -112,24 +152,44 @@ class ResultDir:
     def write_json(self, rel: str, obj) -> None:
         self.write_bytes(rel, json_bytes(obj))
 
+    def holds_work(self) -> bool:
+        """Whether the staging directory holds any file besides the marker."""
+        if not self.staging.is_dir():
+            return False
+        return any(
+            f != self._marker or Path(root) != self.staging
+            for root, _dirs, files in os.walk(self.staging)
+            for f in files
+        )
+
     def commit(self) -> Path:
         """Move the finished result into place (replacing the old one under `overwrite`)."""
-        old = None
-        if self.out.exists():
-            if not self.overwrite:
-                raise ConfigError(
-                    f"output directory {self.out} appeared while running; not replaced"
-                )
-            old = self.out.parent / f".{self.out.name}.old-{os.getpid()}"
-            os.replace(self.out, old)
-        self.out.parent.mkdir(parents=True, exist_ok=True)
-        os.replace(self.staging, self.out)
+        from .._interrupts import check, critical
+        from .._io import atomic_write_bytes
+        from ._outputs import check_output_dir, marker_bytes
+
+        check()
+        # the folder may have changed while the command ran: apply the rules again
+        state = check_output_dir(self.out, inputs=self.inputs, overwrite=self.overwrite)
+        files = []
+        for root, _dirs, names in os.walk(self.staging):
+            files += [Path(root, n).relative_to(self.staging).as_posix() for n in names]
+        files = [f for f in files if f != self._marker]
+        atomic_write_bytes(self.staging / self._marker, marker_bytes(self.command, files))
+        with critical():
+            old = None
+            if state == "result":
+                old = self.out.parent / f".{self.out.name}.old-{os.getpid()}"
+                os.replace(self.out, old)
+            self.out.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(self.staging, self.out)
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
         return self.out
 
     def abort(self) -> None:
-        if not self.keep:
+        """Remove the staging directory (kept, for resuming, when asked and not empty)."""
+        if not self.keep or not self.holds_work():
             shutil.rmtree(self.staging, ignore_errors=True)
 
     def __enter__(self):
@@ -137,7 +197,11 @@ class ResultDir:
 
     def __exit__(self, exc_type, exc, tb):
         if exc_type is None:
-            self.commit()
+            try:
+                self.commit()
+            except BaseException:
+                self.abort()
+                raise
         else:
             self.abort()
         return False

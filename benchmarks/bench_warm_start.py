@@ -1,0 +1,106 @@
+"""Benchmark: a second `hdjax discover` of the same shapes, warm from the compilation cache.
+
+Targets: the second run of `hdjax discover` on a 5*10^4-sample log takes <= 3 s wall (process
+start included) and compiles nothing that takes longer than 0.1 s (JAX's backend-compile
+events). Reference, timed in the same run: the same command with `--no-cache` (cold). The
+cache lives in a temporary XDG_CACHE_HOME, deleted afterwards.
+
+    python benchmarks/bench_warm_start.py [--samples 50000]
+"""
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(HERE))
+
+from _long_logs import machine  # noqa: E402
+
+PROBE = """
+import json, sys
+import jax.monitoring as mon
+compiles, hits = [], []
+COMPILE = "/jax/core/compile/backend_compile_duration"
+mon.register_event_duration_secs_listener(
+    lambda e, d, **k: compiles.append(d) if e == COMPILE else 0)
+mon.register_event_listener(
+    lambda e, **k: hits.append(1) if e == "/jax/compilation_cache/cache_hits" else 0)
+from hdjax.cli import main
+code = main(sys.argv[1:])
+print(json.dumps({"code": code, "compiles": compiles, "hits": len(hits)}))
+"""
+
+
+def run(args, env):
+    t0 = time.perf_counter()
+    out = subprocess.run(
+        [sys.executable, "-c", PROBE, *args], cwd=REPO, env=env, capture_output=True, text=True
+    )
+    wall = time.perf_counter() - t0
+    if out.returncode not in (0,):
+        raise SystemExit(out.stderr[-3000:])
+    probe = json.loads(out.stdout.strip().splitlines()[-1])
+    if probe["code"] != 0:
+        raise SystemExit(f"hdjax {' '.join(args)} failed: {out.stderr[-2000:]}")
+    c = probe["compiles"]
+    return {
+        "wall_s": wall,
+        "exit_code": probe["code"],
+        "n_compiles": len(c),
+        "compile_s_total": sum(c),
+        "compile_s_max": max(c, default=0.0),
+        "n_compiles_over_0.1s": sum(x > 0.1 for x in c),
+        "cache_hits": probe["hits"],
+    }
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--samples", type=int, default=50_000)
+    args = ap.parse_args()
+    from bench_discover import EFFECTS
+
+    import hdjax
+    from tests.discover_data import JOINT, synthetic_recording
+
+    tmp = Path(tempfile.mkdtemp(prefix="hdjax-warm-"))
+    try:
+        hdjax.save_csv(synthetic_recording(1, EFFECTS, n=args.samples), tmp / "train.csv")
+        hdjax.save_csv(synthetic_recording(2, EFFECTS, n=args.samples // 4), tmp / "test.csv")
+        (tmp / "joint.toml").write_text(
+            f"[joint]\nratio = {JOINT.ratio}\nrated_torque = {JOINT.rated_torque}\n"
+        )
+        env = {k: v for k, v in os.environ.items() if k != "HDJAX_NO_CACHE"}
+        env["XDG_CACHE_HOME"] = str(tmp / "xdg")
+        cmd = lambda i: [
+            "discover", "--train", str(tmp / "train.csv"), "--test", str(tmp / "test.csv"),
+            "--joint", str(tmp / "joint.toml"), "--out", str(tmp / f"out{i}"), "--quiet",
+        ]  # fmt: skip
+        out = {"benchmark": "second hdjax discover, warm compilation cache", **machine()}
+        out["train_samples"] = args.samples
+        out["reference_no_cache"] = run([*cmd(0), "--no-cache"], env)
+        out["first_with_cache"] = run(cmd(1), env)
+        out["second_with_cache"] = run(cmd(2), env)
+        files = [p for p in (tmp / "xdg").rglob("*") if p.is_file()]
+        out["cache_files"] = len(files)
+        out["cache_mb"] = sum(p.stat().st_size for p in files) / 1e6
+        second = out["second_with_cache"]
+        out["target_wall_s"] = 3.0
+        out["target_wall_met"] = bool(second["wall_s"] <= 3.0)
+        out["target_no_compile_over_0.1s_met"] = bool(second["n_compiles_over_0.1s"] == 0)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    print(json.dumps(out, indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,112 @@
+"""mkdocs hooks: add the generated reference pages and keep the navigation in step with docs/.
+
+- The command, experiment-file and API reference pages are generated from the code on every
+  build (`reference.py`), so they cannot drift from it; they are never committed.
+- The table of effect families replaces its marker in a page (`reference.FAMILIES_MARKER`).
+- Navigation entries whose page does not exist are dropped (with a note in the build log), and
+  every page under docs/ that the navigation does not list is appended under "More", so a page
+  added to docs/ is always reachable.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+
+from mkdocs.structure.files import File
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import reference  # noqa: E402
+
+log = logging.getLogger("mkdocs.hooks.hdjax")
+
+GENERATED: dict[str, str] = {}
+
+
+def _generated_pages() -> dict[str, str]:
+    pages = {
+        "reference/commands.md": reference.commands_page(),
+        "reference/config.md": reference.config_page(),
+    }
+    pages.update(reference.api_pages())
+    return pages
+
+
+def _nav_pages(nav) -> list[str]:
+    found = []
+    for item in nav or []:
+        if isinstance(item, str):
+            found.append(item)
+        elif isinstance(item, dict):
+            for value in item.values():
+                if isinstance(value, str):
+                    found.append(value)
+                else:
+                    found += _nav_pages(value)
+    return found
+
+
+def _prune(nav, exists):
+    out = []
+    for item in nav or []:
+        if isinstance(item, str):
+            if exists(item):
+                out.append(item)
+            else:
+                log.info("nav: %s is not in docs/ (yet); left out", item)
+        elif isinstance(item, dict):
+            ((title, value),) = item.items()
+            if isinstance(value, str):
+                if exists(value) or value.startswith(("http://", "https://")):
+                    out.append(item)
+                else:
+                    log.info("nav: %s is not in docs/ (yet); left out", value)
+            else:
+                inner = _prune(value, exists)
+                if inner:
+                    out.append({title: inner})
+    return out
+
+
+def on_config(config):
+    GENERATED.clear()
+    GENERATED.update(_generated_pages())
+    docs = Path(config["docs_dir"])
+    api = sorted(p for p in GENERATED if p.startswith("reference/api/"))
+
+    def exists(page: str) -> bool:
+        return page in GENERATED or (docs / page).is_file()
+
+    nav = config["nav"]
+    for item in nav:  # the API section lists every generated package page
+        if isinstance(item, dict) and "Reference" in item:
+            section = [e for e in item["Reference"] if not (isinstance(e, dict) and "API" in e)]
+            section.append({"API": [{Path(p).stem: p} for p in api]})
+            item["Reference"] = section
+    nav = _prune(nav, exists)
+    listed = set(_nav_pages(nav))
+    excluded = {"_gen"}
+    extra = sorted(
+        str(p.relative_to(docs))
+        for p in docs.rglob("*.md")
+        if not excluded.intersection(p.relative_to(docs).parts)
+        and str(p.relative_to(docs)) not in listed
+    )
+    if extra:
+        nav.append({"More": extra})
+    config["nav"] = nav
+    return config
+
+
+def on_page_markdown(markdown, page, config, files):
+    if reference.FAMILIES_MARKER in markdown:
+        markdown = markdown.replace(reference.FAMILIES_MARKER, reference.effect_families_table())
+    return markdown
+
+
+def on_files(files, config):
+    for path, text in GENERATED.items():
+        files.append(File.generated(config, path, content=text))
+    return files

@@ -1,0 +1,148 @@
+"""Log formats beyond CSV and `.npz`: one reader per format, all read through a column map.
+
+| suffix | format | extra to install |
+|---|---|---|
+| `.csv` | CSV, read whole or in chunks (logs larger than memory) | none |
+| `.parquet`, `.pq` | Apache Parquet (recommended for long logs) | `hdjax[parquet]` |
+| `.h5`, `.hdf5`, `.mat` | HDF5, MATLAB v7.3 (HDF5 inside) | `hdjax[hdf5]` |
+| `.mcap` | MCAP (ROS 2 bags and others), a topic and field path per column | `hdjax[mcap]` |
+
+Every reader offers the same three functions on a *table* (column name to 1-D float64 array):
+`column_names(path)`, `read_table(path, names)` and `iter_tables(path, chunk, names)`. The
+public entry points here turn tables into [`hdjax.Recording`][]s through a
+[`hdjax.ColumnMap`][]: [`load`][] reads a whole file, [`iter_recordings`][] streams it chunk by
+chunk with the map's state (multi-turn unwrapping, `offset = "first"`) carried across chunks, so
+the chunks together equal the whole file read at once.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from .._errors import DataError
+
+SUFFIXES = {
+    ".csv": "_csv",
+    ".npz": "_npz",
+    ".parquet": "_parquet",
+    ".pq": "_parquet",
+    ".h5": "_hdf5",
+    ".hdf5": "_hdf5",
+    ".mat": "_hdf5",
+    ".mcap": "_mcap",
+}
+"""File suffix -> reader module."""
+
+EXTRAS = {"_parquet": ("pyarrow", "parquet"), "_hdf5": ("h5py", "hdf5"), "_mcap": ("mcap", "mcap")}
+
+
+def require(package: str, extra: str):
+    """Import an optional dependency, or raise a one-line `DataError` naming the extra."""
+    try:
+        return importlib.import_module(package)
+    except ImportError:
+        raise DataError(
+            f"reading this format needs the {package!r} package; install it with "
+            f"pip install 'hdjax[{extra}]'"
+        ) from None
+
+
+def reader(path):
+    """The reader module for `path`, chosen by its suffix."""
+    suffix = Path(path).suffix.lower()
+    name = SUFFIXES.get(suffix)
+    if name is None:
+        known = ", ".join(sorted(SUFFIXES))
+        raise DataError(f"{path}: unknown recording format {suffix!r}; use one of {known}")
+    return importlib.import_module(f"{__name__}.{name}")
+
+
+def _check_exists(path: Path) -> None:
+    if not path.exists():
+        raise DataError(f"{path}: no such file")
+    if path.stat().st_size == 0:
+        raise DataError(f"{path}: the file is empty")
+
+
+def load(path, columns=None, *, check_units: bool = True):
+    """Load a whole recording from any supported format (see the module table).
+
+    **Arguments:**
+
+    - `path`: the log file; its suffix chooses the reader.
+    - `columns`: an optional [`hdjax.ColumnMap`][].
+    - `check_units`: warn on angles that look like degrees.
+
+    **Returns:** a [`hdjax.Recording`][].
+    """
+    from .._io import _build
+    from ._mapper import needed_sources
+
+    path = Path(path)
+    mod = reader(path)
+    _check_exists(path)
+    names = needed_sources(columns, mod.column_names(path), str(path), mod)
+    table = mod.read_table(path, names)
+    return _build(table, columns, str(path), check_units)
+
+
+def iter_recordings(path, columns=None, *, chunk: int, check_units: bool = True) -> Iterator:
+    """Stream a log as consecutive [`hdjax.Recording`][] chunks of at most `chunk` samples.
+
+    Only the columns the map needs are read. The column map's state carries across chunks
+    (counter unwrapping continues from the previous chunk, `offset = "first"` subtracts the
+    file's first sample), and the time column is checked to increase across chunk boundaries,
+    so concatenating the chunks gives the recording [`load`][] returns.
+    """
+    from ._mapper import ChunkMapper, needed_sources
+
+    if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 2:
+        raise DataError(f"chunk must be an integer >= 2 samples, got {chunk!r}")
+    path = Path(path)
+    mod = reader(path)
+    _check_exists(path)
+    available = mod.column_names(path)
+    names = needed_sources(columns, available, str(path), mod)
+    mapper = ChunkMapper(columns, available if names is None else names, str(path), check_units)
+    for table in _at_least_two(mod.iter_tables(path, chunk, names)):
+        yield mapper(table)
+    if mapper.n_rows == 0:
+        raise DataError(f"{path}: the file has no data rows")
+
+
+def _rows(table: dict) -> int:
+    return next(iter(table.values())).shape[0] if table else 0
+
+
+def _at_least_two(tables):
+    """Drop empty tables and fold a one-row last table into the one before it (a recording
+    chunk needs two samples)."""
+    held = None
+    for table in tables:
+        if _rows(table) == 0:
+            continue
+        if held is not None:
+            if _rows(table) < 2:
+                table = {k: np.concatenate([held[k], table[k]]) for k in held}
+            else:
+                yield held
+        held = table
+    if held is not None:
+        yield held
+
+
+def as_float_column(name: str, values, source: str) -> np.ndarray:
+    """A 1-D float64 column (a `(n, 1)` or `(1, n)` MATLAB vector is flattened)."""
+    arr = np.asarray(values)
+    if arr.ndim == 2 and 1 in arr.shape:
+        arr = arr.reshape(-1)
+    if arr.ndim != 1:
+        raise DataError(f"{source}: column {name!r} must be one-dimensional, got shape {arr.shape}")
+    try:
+        return arr.astype(np.float64, copy=False)
+    except (TypeError, ValueError):
+        raise DataError(f"{source}: column {name!r} is not numeric (dtype {arr.dtype})") from None

@@ -1,0 +1,268 @@
+"""`hdjax fleet MANIFEST.toml --out DIR`: every (joint, log) task of a manifest, on Dask."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+HELP = "run calibrate + discover (or estimate) on every joint-log of a manifest, on Dask"
+EXAMPLE = """\
+example:
+  hdjax fleet cell.toml --out runs/cell
+  hdjax fleet cell.toml --out runs/cell --workers 4
+  hdjax fleet cell.toml --out runs/cell --scheduler tcp://10.0.0.5:8786
+
+Each (joint, log) pair is one task on a Dask cluster: by default a local cluster with one
+single-threaded worker process per core, or the existing cluster at --scheduler. Results stream
+into OUT.partial/ as tasks finish (tasks/*.json and results.parquet, a row per joint-log); OUT
+appears when all tasks have run, with results.parquet, report.md and figures/drift_JOINT.png.
+Finished tasks are skipped when the command is run again (after an interruption, or with
+--overwrite after adding logs to the manifest); a failing task is reported with its one-line
+error and does not stop the others. Exit code 0 when every task succeeded, 1 when some failed.
+"""
+
+WORKER_ENV = {
+    # one core per worker: XLA, OpenMP and BLAS would otherwise each start a thread per core
+    "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+}
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("fleet", help=HELP, description=HELP, epilog=EXAMPLE)
+    p.add_argument("manifest", help="the fleet manifest (TOML: [fleet], [model], [[joints]])")
+    p.add_argument("--out", required=True, help="the result folder")
+    p.add_argument("--scheduler", help="address of a running Dask scheduler (default: local)")
+    p.add_argument(
+        "--workers", type=int, help="worker processes of the local cluster (default: one per core)"
+    )
+    p.add_argument("--overwrite", action="store_true", help="replace an earlier fleet result")
+    p.add_argument("--fresh", action="store_true", help="rerun tasks that finished before")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar on stderr")
+
+
+class ProgressBar:
+    """`[#####-----] 5/16 done, 2 running, 1 failed` on stderr (redrawn in place on a terminal)."""
+
+    def __init__(self, total: int, quiet: bool, stream=None):
+        self.total, self.quiet = total, quiet
+        self.stream = stream or sys.stderr
+        self.tty = getattr(self.stream, "isatty", lambda: False)()
+        self.last = ""
+
+    def __call__(self, done: int, running: int, failed: int) -> None:
+        if self.quiet:
+            return
+        width = 24
+        fill = int(width * done / self.total) if self.total else width
+        line = (
+            f"[{'#' * fill}{'-' * (width - fill)}] {done}/{self.total} done, {running} running, "
+            f"{failed} failed"
+        )
+        if line == self.last:
+            return
+        self.last = line
+        print(("\r" if self.tty else "") + line, end="" if self.tty else "\n", file=self.stream)
+        self.stream.flush()
+
+    def close(self):
+        if self.tty and not self.quiet and self.last:
+            print(file=self.stream)
+
+
+def _client(args, n_tasks: int):
+    """A Dask client: of the cluster at --scheduler, or of a new local cluster."""
+    from .._errors import ConfigError
+    from .._formats import require
+
+    require("distributed", "fleet")
+    import logging
+
+    from dask.distributed import Client, LocalCluster
+
+    if args.scheduler:
+        try:
+            return Client(args.scheduler, timeout="20s"), None
+        except (OSError, TimeoutError) as err:
+            raise ConfigError(
+                f"--scheduler {args.scheduler}: cannot connect ({' '.join(str(err).split())}); "
+                "check the address and that the scheduler is running"
+            ) from None
+    n = args.workers or os.cpu_count() or 1
+    if n < 1:
+        raise ConfigError(f"--workers must be >= 1, got {n}")
+    cluster = LocalCluster(
+        n_workers=min(n, max(1, n_tasks)),
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        silence_logs=logging.ERROR,
+        env=WORKER_ENV,
+    )
+    return Client(cluster), cluster
+
+
+def _cached(folder: Path, task_id: str) -> dict | None:
+    p = folder / "tasks" / f"{task_id}.json"
+    try:
+        row = json.loads(p.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+    return row if row.get("status") == "ok" and row.get("task_id") == task_id else None
+
+
+def command(args, parser) -> int:
+    import jax
+
+    from ..fleet import load_manifest, run_task, write_table
+    from ..report import ResultDir, read_marker
+
+    man = load_manifest(args.manifest)
+    out = Path(args.out)
+    inputs = [man.path] + [Path(t.log) for t in man.tasks]
+    inputs += [Path(j["model"]) for j in man.joints.values() if j["model"]]
+    staging = out.parent / f"{out.name}.partial"
+    rd = ResultDir(
+        out,
+        overwrite=args.overwrite,
+        inputs=inputs,
+        staging=staging,
+        keep_staging_on_error=True,
+        command="fleet",
+    )
+    try:
+        ordered = _collect(args, man, out, staging, rd, run_task, write_table, read_marker, jax)
+    except BaseException:
+        rd.abort()  # keeps the finished tasks in OUT.partial for the next run
+        raise
+    n_failed = sum(r["status"] != "ok" for r in ordered)
+    for r in ordered:
+        if r["status"] != "ok":
+            print(f"hdjax fleet: {r['joint']} {r['log']}: {r['error']}", file=sys.stderr)
+    print(f"{len(ordered) - n_failed} of {len(ordered)} tasks ok, {n_failed} failed; wrote {out}")
+    return 1 if n_failed else 0
+
+
+def _collect(args, man, out, staging, rd, run_task, write_table, read_marker, jax) -> list[dict]:
+    """Reuse finished tasks, run the others, write the table and the report, commit."""
+    rows: dict[str, dict] = {}
+    if not args.fresh:
+        sources = [staging] + ([out] if out.is_dir() and read_marker(out) else [])
+        for t in man.tasks:
+            for src in sources:
+                row = _cached(src, t.task_id)
+                if row is not None:
+                    rows[t.task_id] = row
+                    if src != staging:
+                        rd.write_json(f"tasks/{t.task_id}.json", row)
+                    break
+    todo = [t for t in man.tasks if t.task_id not in rows]
+    bar = ProgressBar(len(man.tasks), args.quiet)
+    if rows and not args.quiet:
+        print(
+            f"hdjax fleet: {len(rows)} of {len(man.tasks)} tasks finished before; skipped",
+            file=sys.stderr,
+        )
+    if todo:
+        client, cluster = _client(args, len(todo))
+        try:
+            _run(client, todo, rows, rd, bar, jax.config.jax_compilation_cache_dir, run_task,
+                 write_table)  # fmt: skip
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    bar.close()
+    ordered = [rows[t.task_id] for t in man.tasks]
+    write_table(ordered, rd.path("results.parquet"))
+    _report(man, ordered, rd)
+    rd.commit()
+    return ordered
+
+
+def _run(client, todo, rows, rd, bar, cache_dir, run_task, write_table) -> int:
+    """Submit every task, collect rows as they finish (each saved at once), redraw the bar."""
+    from dask.distributed import as_completed
+
+    futures = {}
+    for t in todo:
+        fut = client.submit(run_task, t.spec, cache_dir, key=f"hdjax-fleet-{t.task_id}", pure=False)
+        futures[fut] = t
+    done = failed = 0
+    bar(len(rows), min(len(todo), _n_workers(client)), 0)
+    last_table = 0.0
+    for fut in as_completed(list(futures)):
+        t = futures[fut]
+        try:
+            row = fut.result()
+        except Exception as err:  # noqa: BLE001 - a worker lost or killed: the task failed
+            row = {
+                "joint": t.joint, "log": t.log, "date": t.date, "task": t.spec["task"],
+                "status": "failed", "error": f"{type(err).__name__}: {' '.join(str(err).split())}",
+            }  # fmt: skip
+        row["task_id"] = t.task_id
+        rows[t.task_id] = row
+        rd.write_json(f"tasks/{t.task_id}.json", row)
+        done += 1
+        failed += row["status"] != "ok"
+        if time.monotonic() - last_table > 2.0:  # the table so far, for a look while it runs
+            write_table(list(rows.values()), rd.path("results.parquet"))
+            last_table = time.monotonic()
+        bar(len(rows), _running(client, futures), failed)
+    return failed
+
+
+def _n_workers(client) -> int:
+    try:
+        return max(1, len(client.scheduler_info().get("workers", {})))
+    except Exception:  # noqa: BLE001 - only for the progress line
+        return 1
+
+
+def _running(client, futures) -> int:
+    try:
+        keys = {k for v in client.processing().values() for k in v}
+    except Exception:  # noqa: BLE001 - only for the progress line
+        return 0
+    return sum(1 for f in futures if f.key in keys and not f.done())
+
+
+def _report(man, rows, rd) -> None:
+    from ..fleet import drift_figure
+    from ..report import markdown_table
+
+    lines = [
+        f"# Fleet {man.settings['name']}",
+        "",
+        f"Manifest `{man.path.name}`: {len(man.joints)} joints, {len(rows)} joint-logs, task "
+        f"`{man.settings['task']}`. Every row is in `results.parquet` (coefficients as `coef:NAME` "
+        "columns, effects and their amplitudes as lists).",
+        "",
+    ]
+    for name in man.joints:
+        jr = sorted((r for r in rows if r["joint"] == name), key=lambda r: r["date"])
+        png = f"figures/drift_{''.join(c if c.isalnum() or c in '-_.' else '_' for c in name)}.png"
+        rd.write_bytes(png, drift_figure(name, jr))
+        table = [
+            [
+                r["date"],
+                Path(r["log"]).name,
+                r["status"],
+                r.get("n_samples"),
+                r.get("twist_rms_arcsec"),
+                r.get("baseline_test_rms_Nm"),
+                r.get("test_rms_Nm"),
+                ", ".join(r.get("effects") or []) or ("none" if r["status"] == "ok" else ""),
+                r.get("error", ""),
+            ]
+            for r in jr
+        ]
+        header = ["date", "log", "status", "samples", "twist RMS [arcsec]",
+                  "TEST RMS before [N·m]", "TEST RMS [N·m]", "effects", "error"]  # fmt: skip
+        lines += [f"## {name}", "", markdown_table(header, table), "", f"![drift]({png})", ""]
+    rd.write_text("report.md", "\n".join(lines))

@@ -1,0 +1,112 @@
+"""The catalogue of physical effects: one module per family, each seen by the plant, the
+compliance model and the residual loop.
+
+A family ([`hdjax.effects.AbstractFamily`][]) bundles its regression terms
+([`hdjax.effects.AbstractTerm`][]), its plant effects ([`hdjax.effects.PlantEffect`][]), its
+vocabulary and its candidate generator. Adding one is a new module and one
+[`hdjax.effects.register`][] line below (or in user code).
+"""
+
+from ._backlash import (
+    Backlash as Backlash,
+    BacklashFamily as BacklashFamily,
+    LostMotion as LostMotion,
+)
+from ._base import (
+    PLANT_SLOTS as PLANT_SLOTS,
+    SEGMENT_START as SEGMENT_START,
+    TORQUE_KINDS as TORQUE_KINDS,
+    TORQUE_PATH as TORQUE_PATH,
+    AbstractFamily as AbstractFamily,
+    AbstractFriction as AbstractFriction,
+    AbstractHysteresis as AbstractHysteresis,
+    AbstractLinearTorqueTerm as AbstractLinearTorqueTerm,
+    AbstractMemorylessTerm as AbstractMemorylessTerm,
+    AbstractPathTerm as AbstractPathTerm,
+    AbstractPlantEffect as AbstractPlantEffect,
+    AbstractTerm as AbstractTerm,
+    AbstractTorqueFreeTerm as AbstractTorqueFreeTerm,
+    Candidate as Candidate,
+    CandidateContext as CandidateContext,
+    PlantEffect as PlantEffect,
+    f64 as f64,
+    fmt as fmt,
+    require as require,
+)
+from ._coulomb import (
+    Coulomb as Coulomb,
+    CoulombFamily as CoulombFamily,
+    CoulombFriction as CoulombFriction,
+)
+from ._damping import DampingFamily as DampingFamily, TwistRate as TwistRate
+from ._hysteresis import (
+    BoucWen as BoucWen,
+    Dahl as Dahl,
+    Hysteresis as Hysteresis,
+    HysteresisFamily as HysteresisFamily,
+    LuGre as LuGre,
+    TwistHysteresis as TwistHysteresis,
+    dahl_state as dahl_state,
+    dahl_state_numpy as dahl_state_numpy,
+    twist_compliance as twist_compliance,
+)
+from ._kinematic import (
+    Harmonics as Harmonics,
+    KinematicFamily as KinematicFamily,
+    KinematicHarmonics as KinematicHarmonics,
+    PaperFourier as PaperFourier,
+    harmonic_key as harmonic_key,
+    harmonic_pairs as harmonic_pairs,
+)
+from ._offset import Constant as Constant, OffsetFamily as OffsetFamily
+from ._registry import (
+    discover_families as discover_families,
+    families as families,
+    in_slot as in_slot,
+    library_options as library_options,
+    plant_effect as plant_effect,
+    plant_effect_names as plant_effect_names,
+    plant_effects as plant_effects,
+    register as register,
+    term_type as term_type,
+    term_types as term_types,
+    unregister as unregister,
+    vocabulary as vocabulary,
+)
+from ._stiffening import (
+    CubicSpring as CubicSpring,
+    Stiffening as Stiffening,
+    StiffeningFamily as StiffeningFamily,
+)
+from ._stribeck import StribeckFamily as StribeckFamily, StribeckFriction as StribeckFriction
+from ._thermal import (
+    Column as Column,
+    ColumnTimesTorque as ColumnTimesTorque,
+    Temperature as Temperature,
+    ThermalFamily as ThermalFamily,
+)
+from ._viscous import (
+    Viscous as Viscous,
+    ViscousFamily as ViscousFamily,
+    ViscousFriction as ViscousFriction,
+)
+from ._wave_generator import (
+    WG_COMPLIANCE as WG_COMPLIANCE,
+    CurrentPolynomial as CurrentPolynomial,
+    WaveGenerator as WaveGenerator,
+    WaveGeneratorFamily as WaveGeneratorFamily,
+)
+
+# The built-in catalogue. The order is the plant's order of application and the order of the
+# vocabulary, the library options and the candidates; one line per family.
+register(KinematicFamily())
+register(CoulombFamily())
+register(ViscousFamily())
+register(StribeckFamily())
+register(HysteresisFamily())
+register(BacklashFamily())
+register(StiffeningFamily())
+register(DampingFamily())
+register(ThermalFamily())
+register(WaveGeneratorFamily())
+register(OffsetFamily())

@@ -1,0 +1,116 @@
+r"""Lost motion (backlash): the joint twists freely by a small angle around zero torque.
+
+Clearances between the flexspline and circular-spline teeth and in the wave-generator bearing
+let the output move by a small angle $b$ (catalogue "lost motion", measured at $\pm 4\%$ of rated
+torque, about 1 arcmin for size 40-50 units) before the teeth carry load. The plant adds the
+smooth step $\frac{b}{2}\tanh(T/T_b)$ to the deflection in series with the flexspline (so the
+budget is then inverted by Newton steps); the regression term is $\tanh(T/T_b)$ of the
+torque, inverted by Newton steps as well; the loop scans $T_b$ on a grid of fractions of the
+rated torque.
+
+References: Song et al. 2019, Section II (lost motion of the harmonic drive); Harmonic Drive
+CSG/CSF catalogue, "lost motion".
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Array, Float
+from ._base import (
+    AbstractFamily,
+    AbstractMemorylessTerm,
+    AbstractPlantEffect,
+    Candidate,
+    PlantEffect,
+    check_positive,
+    f64,
+    fmt,
+    require,
+)
+
+
+class Backlash(AbstractMemorylessTerm):
+    """Lost motion around zero torque: a smooth step $\\tanh(T/T_b)$ of width $T_b$."""
+
+    width: float = eqx.field(default=1.0, static=True)
+
+    def __check_init__(self):
+        check_positive("Backlash", "width", self.width)
+
+    @property
+    def key(self) -> str:
+        return "backlash:torque"
+
+    def names(self) -> tuple[str, ...]:
+        return (f"tanh(T/{fmt(self.width)})",)
+
+    def value_and_slope(self, torque):
+        v = jnp.tanh(torque / self.width)
+        return v, (1.0 - v**2) / self.width
+
+    def numpy_value(self, torque) -> np.ndarray:
+        return np.tanh(np.asarray(torque) / self.width)
+
+
+class LostMotion(AbstractPlantEffect):
+    r"""Lost motion: the deflection gains $\frac{b}{2}\tanh(T/T_b)$ [rad].
+
+    `width` $b$ [rad] is the lost motion, `torque_scale` $T_b$ [N·m] the torque over which the
+    play closes (catalogues measure lost motion at $\pm 4\%$ of rated torque).
+    """
+
+    width: Float[Array, ""]
+    torque_scale: Float[Array, ""]
+
+    def reciprocals(self):
+        return {"torque_scale": 1.0 / self.torque_scale}
+
+    def deflection(self, torque, inv=None):
+        inv = self.reciprocals() if inv is None else inv
+        return 0.5 * self.width * jnp.tanh(torque * inv["torque_scale"])
+
+    def slope(self, torque, inv=None):
+        inv = self.reciprocals() if inv is None else inv
+        th = jnp.tanh(torque * inv["torque_scale"])
+        return 0.5 * self.width * (1.0 - th * th) * inv["torque_scale"]
+
+
+def _build(name: str, p: dict) -> LostMotion:
+    require(name, "width", p["width"], nonneg=True, shape=())
+    require(name, "torque_scale", p["torque_scale"], positive=True, shape=())
+    return LostMotion(f64(p["width"]), f64(p["torque_scale"]))
+
+
+_ARCMIN = np.pi / (180.0 * 60.0)
+
+
+class BacklashFamily(AbstractFamily):
+    """Lost motion: plant `backlash`; term `Backlash`; a grid of widths $T_b$."""
+
+    name: ClassVar[str] = "backlash"
+    terms: ClassVar[tuple] = (Backlash,)
+    plant_effects: ClassVar[tuple] = (
+        PlantEffect(
+            "backlash",
+            "compliance",
+            lambda rated, k1, given: dict(width=1.0 * _ARCMIN, torque_scale=0.02 * rated),
+            _build,
+        ),
+    )
+    discover_families: ClassVar[tuple] = ("backlash:torque",)
+    vocabulary: ClassVar[str] = "backlash:torque"
+    options: ClassVar[dict] = {"backlash_fractions": (0.005, 0.01, 0.02, 0.05)}
+
+    def candidates(self, ctx):
+        if not ctx.wants("backlash:torque"):
+            return []
+        out = []
+        for frac in ctx.option(self, "backlash_fractions"):
+            term = Backlash(width=frac * ctx.rated_torque)
+            out.append(Candidate(term.key, term.key, term))
+        return out

@@ -1,0 +1,431 @@
+r"""The abstract shapes of an effect family: its regression term, its plant effect, the family.
+
+A *family* is one physical effect of the joint (Coulomb friction, lost motion, hysteresis, ...)
+seen from every side hdjax looks at it:
+
+- the **plant** simulates it: an [`hdjax.effects.AbstractPlantEffect`][] with differentiable
+  array parameters, in one of the plant's *slots* (motor or output friction, kinematic error,
+  an additive compliance, a parallel spring, ...);
+- the **compliance model** regresses on it: an [`hdjax.effects.AbstractTerm`][], a group of
+  design-matrix columns with hashable hyperparameters (a smoothing speed, an order), whose
+  dependence on torque tells the inversion what to do;
+- the **residual loop** proposes it: the family's `candidates(ctx)` generates the terms to try
+  (a grid of scales, or the orders a spectrum of the residual points at).
+
+The layout follows diffrax's `AbstractTerm` and optimistix's `_solver/`: abstract classes declare
+`eqx.AbstractVar`/`eqx.AbstractClassVar` and abstract methods, final classes fill them in, and
+`__check_init__` validates what a user can get wrong.
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+import math
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import ConfigError
+
+TORQUE_KINDS = ("none", "linear", "memoryless", "path")
+"""How a term depends on the torque $T$ (see [`hdjax.effects.AbstractTerm`][])."""
+
+TORQUE_PATH = "_torque_path"
+"""Name of an optional signal that drives path-dependent terms at calibration (see
+[`hdjax.compliance.Hysteresis`][]): the torque *estimated* by a previous model, so the state is
+computed as the estimator will compute it, causally and without the reference sensor."""
+
+SEGMENT_START = "_segment_start"
+"""Name of an optional signal, 1 at the first sample of each contiguous segment of a recording
+with gaps: memory states (hysteresis) restart there (see [`hdjax.effects.dahl_state`][])."""
+
+PLANT_SLOTS = (
+    "kinematic_m",
+    "kinematic_l",
+    "motor_friction",
+    "output_friction",
+    "hysteresis",
+    "compliance",
+    "spring",
+    "temperature",
+    "wave_generator",
+)
+"""Where a plant effect enters the joint (see `hdjax/plant/_dynamics.py`):
+
+- `kinematic_m`, `kinematic_l`: a twist offset [rad] from the recorded motor / load angle,
+  `effect(angle, inv)` (Song et al. eq. (9));
+- `motor_friction`, `output_friction`: a friction torque [N·m] from the motor / link speed,
+  `effect(omega, inv)`;
+- `compliance`: a deflection [rad] in series with the flexspline, `deflection(T, inv)` and
+  `slope(T, inv)` (the plant then inverts the budget by Newton steps);
+- `spring`: a torque [N·m] in parallel with the flexspline, `torque(d_eff)`;
+- `hysteresis`, `temperature`, `wave_generator`: the state-carrying or closed-form effects the
+  plant handles by name (at most one each).
+"""
+
+
+def fmt(x: float) -> str:
+    """A number as a short decimal string (`2`, `1.98`, `0.5`) for column names and keys."""
+    return f"{x:.10g}"
+
+
+def is_finite_number(x) -> bool:
+    """Whether `x` is a plain finite Python number (not a bool, not a tracer)."""
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def check_positive(owner: str, field: str, value) -> None:
+    """Raise `ConfigError` when a plain-number hyperparameter is not finite and positive."""
+    if isinstance(value, (int, float)) and not (math.isfinite(value) and value > 0):
+        raise ConfigError(f"{owner}: {field} must be finite and positive, got {value!r}")
+
+
+# ---------------------------------------------------------------------------------------------
+# Regression terms
+# ---------------------------------------------------------------------------------------------
+
+
+class AbstractTerm(eqx.Module):
+    r"""A named group of columns of the twist model (Song et al. eq. (10)), linear in its
+    coefficients.
+
+    Every field is static (hashable hyperparameters fixed at construction), so a term can sit
+    in a static field of [`hdjax.compliance.ComplianceModel`][] and is never traced.
+
+    `torque_kind` tells the inversion how the group depends on the torque $T$:
+
+    - `"none"`: not at all (a column of the torque-free part $h$);
+    - `"linear"`: $\psi = u(x) T$, solved in closed form (`torque_slope` gives $u$);
+    - `"memoryless"`: nonlinearly through the present torque only, solved by safeguarded
+      Newton steps (`value_and_slope`);
+    - `"path"`: through the torque history, solved by fixed-point iteration on the causally
+      estimated torque path.
+
+    **Subclasses implement:** `key` (the vocabulary key), `names()` (one name per column),
+    `columns(sig, torque)` (JAX, shape `(n, len(names))`) and `numpy_columns(sig, torque)` (the
+    same in NumPy: the reference the tests compare with, and what the residual loop scores
+    with when `score_in_numpy`).
+    """
+
+    torque_kind: eqx.AbstractClassVar[str]
+    score_in_numpy: ClassVar[bool] = True
+
+    def __check_init__(self):
+        if self.torque_kind not in TORQUE_KINDS:
+            raise ConfigError(
+                f"term {type(self).__name__} has torque_kind {self.torque_kind!r}; "
+                f"expected one of {TORQUE_KINDS}"
+            )
+
+    @property
+    @abc.abstractmethod
+    def key(self) -> str:
+        """The vocabulary key of this term (e.g. `coulomb:omega_m`)."""
+
+    @abc.abstractmethod
+    def names(self) -> tuple[str, ...]:
+        """One name per column."""
+
+    @abc.abstractmethod
+    def columns(self, sig, torque=None):
+        """The columns, shape `(n_samples, len(names()))`."""
+
+    @abc.abstractmethod
+    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+        """The columns computed in NumPy (the reference for `columns`)."""
+
+
+class AbstractTorqueFreeTerm(AbstractTerm):
+    """A term that does not depend on the torque (`torque_kind = "none"`)."""
+
+    torque_kind: ClassVar[str] = "none"
+
+
+class AbstractLinearTorqueTerm(AbstractTerm):
+    r"""A term linear in torque, $\psi = u(x) T$ (`torque_kind = "linear"`), inverted in closed
+    form. Subclasses implement `torque_slope(sig)` $= u(x)$ and its NumPy twin."""
+
+    torque_kind: ClassVar[str] = "linear"
+
+    @abc.abstractmethod
+    def torque_slope(self, sig):
+        """$u(x)$ with $\\psi = u(x) T$."""
+
+    @abc.abstractmethod
+    def numpy_torque_slope(self, sig) -> np.ndarray:
+        """`torque_slope` in NumPy."""
+
+    def columns(self, sig, torque):
+        return (self.torque_slope(sig) * torque)[:, None]
+
+    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+        return (self.numpy_torque_slope(sig) * np.asarray(torque))[:, None]
+
+
+class AbstractMemorylessTerm(AbstractTerm):
+    r"""A one-column term $\psi = f(T)$ of the present torque (`torque_kind = "memoryless"`).
+
+    Subclasses implement `value_and_slope(torque)` $= (f(T), f'(T))$ (the inversion's Newton
+    steps use the slope) and `numpy_value(torque)`.
+    """
+
+    torque_kind: ClassVar[str] = "memoryless"
+
+    @abc.abstractmethod
+    def value_and_slope(self, torque):
+        """$(f(T), f'(T))$."""
+
+    @abc.abstractmethod
+    def numpy_value(self, torque) -> np.ndarray:
+        """$f(T)$ in NumPy."""
+
+    def columns(self, sig, torque):
+        return self.value_and_slope(torque)[0][:, None]
+
+    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+        return self.numpy_value(np.asarray(torque))[:, None]
+
+
+class AbstractPathTerm(AbstractTerm):
+    """A term driven by the torque history (`torque_kind = "path"`): hysteresis."""
+
+    torque_kind: ClassVar[str] = "path"
+    score_in_numpy: ClassVar[bool] = False
+
+
+# ---------------------------------------------------------------------------------------------
+# Plant effects
+# ---------------------------------------------------------------------------------------------
+
+
+class AbstractPlantEffect(eqx.Module):
+    """An effect the plant simulates: array parameters (differentiable) and `reciprocals()`.
+
+    `reciprocals()` returns the inverses of its scale parameters (name -> array); the simulator
+    computes them once outside the time loop and passes them back as `inv=`, because a division
+    by a parameter inside the loop keeps XLA from fusing the step (see `hdjax/plant/_dynamics.py`).
+    """
+
+    @abc.abstractmethod
+    def reciprocals(self) -> dict:
+        """Inverses of the scale parameters, computed once outside the time loop."""
+
+
+class AbstractFriction(AbstractPlantEffect):
+    """A friction law for the `motor_friction` / `output_friction` slots:
+    `effect(omega, inv)` [N·m], and `max_slope()`, its largest slope $|dF/d\\omega|$ near zero
+    speed [N·m·s/rad] (the integrator's stability check uses it)."""
+
+    @abc.abstractmethod
+    def __call__(self, omega, inv=None):
+        """The friction torque at speed `omega`."""
+
+    @abc.abstractmethod
+    def max_slope(self):
+        """The largest slope of the friction law (a float or a 0-d array)."""
+
+
+class AbstractHysteresis(AbstractPlantEffect):
+    """A hysteresis law for the `hysteresis` slot: `rate(z, d_dot, inv)` ($\\dot z$ of the
+    hysteresis torque), `saturation()` (the loop's half-height) and `initial_stiffness()` (the
+    stiffness right after a reversal, for the integrator's stability check)."""
+
+    @abc.abstractmethod
+    def rate(self, z, d_dot, inv=None):
+        """$\\dot z$ at hysteresis torque `z` and deflection rate `d_dot`."""
+
+    @abc.abstractmethod
+    def saturation(self):
+        """The loop's half-height [N·m]."""
+
+    @abc.abstractmethod
+    def initial_stiffness(self):
+        """$dz/dd$ right after a reversal [N·m/rad]."""
+
+
+_SLOT_BASES = {
+    "motor_friction": AbstractFriction,
+    "output_friction": AbstractFriction,
+    "hysteresis": AbstractHysteresis,
+}
+
+
+def check_slot(name: str, slot: str, effect) -> None:
+    """Raise `ConfigError` when a built plant effect does not have its slot's interface."""
+    base = _SLOT_BASES.get(slot, AbstractPlantEffect)
+    if not isinstance(effect, base):
+        raise ConfigError(
+            f"plant effect {name!r} in slot {slot!r} must be an {base.__name__}, got "
+            f"{type(effect).__name__}"
+        )
+
+
+def f64(x):
+    """`x` as a float64 JAX array."""
+    return jnp.asarray(x, jnp.float64)
+
+
+def concrete(x):
+    """A NumPy copy of `x` when it is concrete, else None (inside a trace)."""
+    try:
+        return np.asarray(x, dtype=np.float64)
+    except Exception:  # a tracer
+        return None
+
+
+def require(name: str, field: str, value, *, positive=False, nonneg=False, shape=None):
+    """Validate one plant-effect parameter in plain Python (skipped for tracers)."""
+    arr = concrete(value)
+    if arr is None:
+        return
+    if shape is not None and arr.shape != shape:
+        raise ConfigError(
+            f"effect {name!r}: parameter {field!r} must have shape {shape}, got {arr.shape}"
+        )
+    if not np.all(np.isfinite(arr)):
+        raise ConfigError(f"effect {name!r}: parameter {field!r} must be finite, got {arr}")
+    if positive and not np.all(arr > 0):
+        raise ConfigError(f"effect {name!r}: parameter {field!r} must be positive, got {arr}")
+    if nonneg and not np.all(arr >= 0):
+        raise ConfigError(f"effect {name!r}: parameter {field!r} must be non-negative, got {arr}")
+
+
+def vector(name: str, field: str, value):
+    """A 1-D float64 parameter, refusing other ranks."""
+    arr = concrete(value)
+    if arr is not None and arr.ndim != 1:
+        raise ConfigError(
+            f"effect {name!r}: parameter {field!r} must be a 1-D list, got shape {arr.shape}"
+        )
+    return f64(value)
+
+
+@dataclasses.dataclass(frozen=True)
+class PlantEffect:
+    """How a family switches an effect on in the plant.
+
+    **Fields:**
+
+    - `name`: the plant's effect name (`PlantParams.effects` key, e.g. `coulomb_m`).
+    - `slot`: where it enters the joint, one of [`hdjax.effects.PLANT_SLOTS`][].
+    - `defaults`: `(rated_torque, k1, given) -> dict`, the default parameters for a joint of that
+      rated torque [N·m] and small-torque compliance [rad/N·m] (`given` are the user's
+      parameters, for families whose defaults depend on a choice such as the hysteresis model).
+    - `build`: `(name, params) -> AbstractPlantEffect`, validating in plain Python.
+    """
+
+    name: str
+    slot: str
+    defaults: Callable[[float, float, Mapping], dict]
+    build: Callable[[str, dict], AbstractPlantEffect]
+
+    def __post_init__(self):
+        if self.slot not in PLANT_SLOTS:
+            raise ConfigError(
+                f"plant effect {self.name!r}: slot {self.slot!r} is not one of {PLANT_SLOTS}"
+            )
+
+
+# ---------------------------------------------------------------------------------------------
+# Candidates for the residual loop
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class Candidate:
+    """One candidate effect: its vocabulary `key`, `family` and the term group it adds."""
+
+    key: str
+    family: str
+    term: object
+    origin: str = "grid"
+
+
+@dataclasses.dataclass
+class CandidateContext:
+    """What a family's candidate generator may read (built by the residual loop each step).
+
+    **Fields:** `sig` (training [`hdjax.compliance.Signals`][]), `torque` (reference torque),
+    `residual` (twist residual of the present model), `ratio`, `rated_torque`, `twist_sign`,
+    `existing_keys` / `existing_terms` (effects already in the model, not offered again),
+    `extra_columns` (usable extra recording columns), `families` (discover families switched
+    on), `options` (the library options), `spectrum_orders` (a callable
+    `(signal, order_range, named_orders, existing_orders, n_peaks) -> [(order, origin)]`:
+    the spectrum peaks of the residual against `signal` (refined) and the named orders it can
+    resolve, not yet in the model; it records the spectrum; spectrum families call it).
+    """
+
+    sig: Any
+    torque: Any
+    residual: Any
+    ratio: float
+    rated_torque: float
+    twist_sign: float
+    existing_keys: tuple[str, ...]
+    existing_terms: tuple
+    extra_columns: tuple[str, ...]
+    families: frozenset
+    options: Any
+    spectrum_orders: Callable | None = None
+
+    def option(self, family: AbstractFamily, name: str):
+        """A library option of `family`, or the family's default when the options lack it."""
+        return getattr(self.options, name, family.options[name])
+
+    def wants(self, family_name: str) -> bool:
+        """Whether the discover family `family_name` is switched on and not yet in the model."""
+        return family_name in self.families and family_name not in self.existing_keys
+
+
+# ---------------------------------------------------------------------------------------------
+# The family
+# ---------------------------------------------------------------------------------------------
+
+
+class AbstractFamily(eqx.Module):
+    """One physical effect family: its terms, plant effects, vocabulary and candidates.
+
+    **Class variables every family declares:**
+
+    - `name`: short name (`"coulomb"`).
+    - `terms`: its [`hdjax.effects.AbstractTerm`][] classes (the saved-model type table is the
+      union over the registered families).
+    - `plant_effects`: its [`hdjax.effects.PlantEffect`][] entries (may be empty).
+    - `discover_families`: the names the residual loop offers it under
+      (`"coulomb:omega_m"`, ...; may be empty).
+    - `vocabulary`: the keys it reports, as written in a discover report (may be empty).
+    - `options`: library options (grids) with their defaults; they become fields of
+      [`hdjax.discover.LibraryOptions`][].
+
+    **Method:** `candidates(ctx)`: the terms to try at one step of the residual loop.
+    """
+
+    name: eqx.AbstractClassVar[str]
+    terms: eqx.AbstractClassVar[tuple]
+    plant_effects: eqx.AbstractClassVar[tuple]
+    discover_families: eqx.AbstractClassVar[tuple]
+    vocabulary: eqx.AbstractClassVar[str]
+    options: eqx.AbstractClassVar[dict]
+
+    def __check_init__(self):
+        owner = f"effect family {type(self).__name__}"
+        if not (isinstance(self.name, str) and self.name):
+            raise ConfigError(f"{owner}: name must be a non-empty string")
+        for t in self.terms:
+            if not (isinstance(t, type) and issubclass(t, AbstractTerm)):
+                raise ConfigError(f"{owner}: terms must be AbstractTerm subclasses, got {t!r}")
+        for p in self.plant_effects:
+            if not isinstance(p, PlantEffect):
+                raise ConfigError(f"{owner}: plant_effects must be PlantEffect, got {p!r}")
+        if self.discover_families and not self.terms:
+            raise ConfigError(f"{owner}: a family the loop can offer needs at least one term")
+        if not isinstance(self.options, dict):
+            raise ConfigError(f"{owner}: options must be a dict name -> default")
+
+    @abc.abstractmethod
+    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
+        """The candidate terms of this family for one step of the residual loop."""

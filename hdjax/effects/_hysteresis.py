@@ -1,0 +1,347 @@
+r"""Hysteresis: the twist depends on the torque's history, not only its present value.
+
+Loading and unloading a harmonic drive trace different twist-torque curves (Song et al. Fig. 2,
+the loop B to B'): friction inside the flexspline teeth and the wave-generator bearing stores and
+releases a torque. The plant carries a hysteresis torque $z$ in parallel with the elastic torque,
+driven by the deflection rate, with a Bouc-Wen, Dahl or LuGre law. The regression term is a
+causal, rate-independent Dahl state, $z_k = z_{k-1} + \frac{\Delta u_k}{T_h}
+(1 - z_{k-1}\,\mathrm{sgn}\,\Delta u_k)$, of the torque path (`Hysteresis`: at estimation driven
+by the torque being estimated, by an implicit causal step, never by the reference sensor) or of
+the measured twist over the compliance (`TwistHysteresis`, what the residual loop offers: the
+plant's laws follow the deflection). The loop scans $T_h$ on a grid of fractions of the rated
+torque.
+
+References: Song et al. 2019, Section II and Fig. 2; P. R. Dahl, "Solid friction damping of
+mechanical vibrations", AIAA Journal 14(12), 1976.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Array, Float
+from .._errors import ConfigError
+from .._io import did_you_mean
+from ._base import (
+    SEGMENT_START,
+    TORQUE_PATH,
+    AbstractFamily,
+    AbstractHysteresis,
+    AbstractPathTerm,
+    AbstractTorqueFreeTerm,
+    Candidate,
+    PlantEffect,
+    check_positive,
+    concrete,
+    f64,
+    fmt,
+    require,
+)
+
+
+def dahl_state(torque, torque_scale: float, reset=None):
+    """Causal Dahl-type hysteresis state driven by a torque path.
+
+    $z_k = z_{k-1} + \\frac{\\Delta T_k}{T_h} (1 - z_{k-1}\\,\\mathrm{sgn}\\,\\Delta T_k)$,
+    clipped to $[-1, 1]$: the rate-independent Dahl model ($\\sigma = 1$) with the torque as its
+    input, so
+    $z$ saturates at $\\pm 1$ after a torque reversal of a few $T_h$ (the loop of Song et al.
+    Fig. 2, B to B'). Starts at $z_0 = 0$, and restarts at 0 wherever `reset` (optional, nonzero
+    at the first sample of a segment after a gap) is set.
+    """
+
+    dT = jnp.diff(torque, prepend=torque[:1]) / torque_scale
+    if reset is None:
+        reset = jnp.zeros(dT.shape, bool)
+    return _dahl_scan(dT, jnp.asarray(reset).astype(bool))
+
+
+@jax.jit
+def _dahl_scan(du, reset):
+    # du = dT / T_h, so one compiled scan serves every torque scale.
+    def _step(z, x):
+        d, rs = x
+        # a segment after a gap starts afresh: no state, no step across the gap
+        z, d = jnp.where(rs, 0.0, z), jnp.where(rs, 0.0, d)
+        # Dahl: dz = dT/Th * (1 - z sign(dT)); explicit step, clipped for large steps.
+        z = jnp.clip(z + d * (1.0 - z * jnp.sign(d)), -1.0, 1.0)
+        return z, z
+
+    return jax.lax.scan(_step, jnp.zeros((), du.dtype), (du, reset))[1]
+
+
+def dahl_state_numpy(torque, torque_scale: float, reset=None) -> np.ndarray:
+    """[`dahl_state`][] in NumPy (a plain loop; the reference for tests)."""
+    torque = np.asarray(torque, np.float64)
+    du = np.diff(torque, prepend=torque[:1]) / torque_scale
+    reset = np.zeros(du.shape, bool) if reset is None else np.asarray(reset).astype(bool)
+    z, out = 0.0, np.empty_like(du)
+    for k, d in enumerate(du):
+        if reset[k]:
+            z, d = 0.0, 0.0
+        z = min(1.0, max(-1.0, z + d * (1.0 - z * np.sign(d))))
+        out[k] = z
+    return out
+
+
+class Hysteresis(AbstractPathTerm):
+    """Hysteresis in twist as a Dahl state driven by the torque path ([`dahl_state`][]).
+
+    At estimation the state is driven by the torque being estimated (the estimate without the
+    path terms, causally, one pass), never by the reference sensor. At calibration it is
+    driven by the signal `TORQUE_PATH` when present (the residual loop supplies the previous
+    model's estimate), else by the reference torque.
+    """
+
+    torque_scale: float = eqx.field(default=1.0, static=True)
+
+    def __check_init__(self):
+        check_positive("Hysteresis", "torque_scale", self.torque_scale)
+
+    @property
+    def key(self) -> str:
+        return "hysteresis:torque"
+
+    def names(self) -> tuple[str, ...]:
+        return (f"dahl(T/{fmt(self.torque_scale)})",)
+
+    def columns(self, sig, torque):
+        # A torque path supplied with the signals (the estimate of a previous model, so that
+        # calibration sees the state the estimator will see) takes precedence.
+        driver = sig.extras.get(TORQUE_PATH, torque)
+        return dahl_state(driver, self.torque_scale, sig.extras.get(SEGMENT_START))[:, None]
+
+    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+        driver = sig.extras.get(TORQUE_PATH, torque)
+        reset = sig.extras.get(SEGMENT_START)
+        reset = None if reset is None else np.asarray(reset)
+        return dahl_state_numpy(np.asarray(driver), self.torque_scale, reset)[:, None]
+
+
+class TwistHysteresis(AbstractTorqueFreeTerm):
+    """Hysteresis whose memory state follows the measured deformation.
+
+    The flexspline's hysteresis is a torque $z$ in parallel with the elastic torque whose state
+    follows the *deflection* path (the plant's Bouc-Wen, Dahl and LuGre laws): $T = T_s(d) +
+    z(d)$, so in the twist domain $\\Delta\\theta \\approx f(T) - k\\,z(\\Delta\\theta)$, a state
+    of the measured twist that needs no torque at all. It is computed causally from the
+    measurement, the same way at calibration, in every cross-validation fold and at
+    estimation, and the inversion only removes a known column (a torque-free term), which is
+    stable whatever the loop's sharpness. The twist is divided by `compliance` (the joint's
+    small-torque compliance, [`twist_compliance`][]) so that `torque_scale` reads in N·m of
+    torque path, as for [`Hysteresis`][]. Restarts at gaps (`SEGMENT_START`).
+    """
+
+    torque_scale: float = eqx.field(default=1.0, static=True)
+    compliance: float = eqx.field(default=1.0, static=True)
+
+    def __check_init__(self):
+        check_positive("TwistHysteresis", "torque_scale", self.torque_scale)
+        check_positive("TwistHysteresis", "compliance", self.compliance)
+
+    @property
+    def key(self) -> str:
+        return "hysteresis:torque"
+
+    def names(self) -> tuple[str, ...]:
+        return (f"dahl(twist/{fmt(self.compliance)}/{fmt(self.torque_scale)})",)
+
+    def columns(self, sig, torque=None):
+        driver = sig.twist / self.compliance
+        return dahl_state(driver, self.torque_scale, sig.extras.get(SEGMENT_START))[:, None]
+
+    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+        reset = sig.extras.get(SEGMENT_START)
+        reset = None if reset is None else np.asarray(reset)
+        driver = np.asarray(sig.twist) / self.compliance
+        return dahl_state_numpy(driver, self.torque_scale, reset)[:, None]
+
+
+def twist_compliance(sig, torque, rated_torque: float) -> float:
+    """The small-torque compliance [rad/(N·m)]: the least-squares slope of the twist against
+    the reference torque over $|T| < \\tau_0/3$ (all samples if too few), 4 significant digits
+    (a static field of [`TwistHysteresis`][])."""
+    tw = np.asarray(sig.twist, np.float64)
+    t = np.asarray(torque, np.float64)
+    inner = np.abs(t) < rated_torque / 3.0
+    if inner.sum() < 50:
+        inner = np.ones(t.shape, bool)
+    x = t[inner] - t[inner].mean()
+    slope = float(np.dot(x, tw[inner] - tw[inner].mean()) / max(np.dot(x, x), 1e-300))
+    return float(f"{abs(slope):.4g}") if slope != 0 else 1.0
+
+
+# ---------------------------------------------------------------------------------------------
+# Plant: a torque state z in parallel with the elastic torque, driven by the deflection rate
+# ---------------------------------------------------------------------------------------------
+
+
+def _abs(x, eps):
+    return jnp.sqrt(x * x + eps)
+
+
+class BoucWen(AbstractHysteresis):
+    r"""Bouc-Wen hysteresis torque $z$ [N·m] driven by the deflection rate $\dot d$:
+
+    $\dot z = a \dot d - \beta |\dot d| |z|^{n-1} z - \gamma \dot d |z|^n$,
+
+    which saturates at $z_{max} = (a/(\beta+\gamma))^{1/n}$. `a` [N·m/rad] is the stiffness
+    added right after a reversal; `beta`, `gamma` shape the loop (`beta >= gamma`,
+    `beta + gamma > 0` keep it bounded and dissipative); `n` is a static integer exponent.
+    Absolute values are smoothed ($\sqrt{x^2+\epsilon}$) so gradients exist.
+    """
+
+    a: Float[Array, ""]
+    beta: Float[Array, ""]
+    gamma: Float[Array, ""]
+    n: int = eqx.field(static=True, default=1)
+
+    def reciprocals(self):
+        return {}
+
+    def rate(self, z, d_dot, inv=None):
+        az = _abs(z, 1e-12)
+        ad = _abs(d_dot, 1e-16)
+        zn = az ** (self.n - 1) if self.n > 1 else 1.0
+        return self.a * d_dot - self.beta * ad * zn * z - self.gamma * d_dot * zn * az
+
+    def saturation(self):
+        return (self.a / (self.beta + self.gamma)) ** (1.0 / self.n)
+
+    def initial_stiffness(self):
+        return self.a
+
+
+class Dahl(AbstractHysteresis):
+    r"""Dahl hysteresis torque $z$ [N·m]: $\dot z = \sigma (\dot d - |\dot d| z / F_h)$.
+
+    `sigma` [N·m/rad] is the stiffness right after a reversal, `level` [N·m] the saturation
+    (the half-height of the loop).
+    """
+
+    sigma: Float[Array, ""]
+    level: Float[Array, ""]
+
+    def reciprocals(self):
+        return {"level": 1.0 / self.level}
+
+    def rate(self, z, d_dot, inv=None):
+        inv = self.reciprocals() if inv is None else inv
+        return self.sigma * (d_dot - _abs(d_dot, 1e-16) * z * inv["level"])
+
+    def saturation(self):
+        return self.level
+
+    def initial_stiffness(self):
+        return self.sigma
+
+
+class LuGre(AbstractHysteresis):
+    r"""LuGre-type hysteresis: a bristle state with a Stribeck-shaped limit.
+
+    $\dot z = \sigma_0 (\dot d - |\dot d| z / g(\dot d))$ with
+    $g(v) = F_c + (F_s - F_c) e^{-(v/v_s)^2}$, so the loop height depends on the deflection rate.
+    """
+
+    sigma0: Float[Array, ""]
+    level: Float[Array, ""]
+    peak: Float[Array, ""]
+    speed: Float[Array, ""]
+
+    def reciprocals(self):
+        return {"speed": 1.0 / self.speed}
+
+    def rate(self, z, d_dot, inv=None):
+        inv = self.reciprocals() if inv is None else inv
+        x = d_dot * inv["speed"]
+        g = self.level + (self.peak - self.level) * jnp.exp(-(x * x))
+        return self.sigma0 * (d_dot - _abs(d_dot, 1e-16) * z / g)
+
+    def saturation(self):
+        """Loop half-height at deflection rates well above `speed`."""
+        return self.level
+
+    def initial_stiffness(self):
+        return self.sigma0
+
+
+HYSTERESIS_MODELS = ("bouc_wen", "dahl", "lugre")
+
+
+def _check_model(model) -> None:
+    if model not in HYSTERESIS_MODELS:
+        raise ConfigError(
+            f"effect 'hysteresis': unknown model {model!r}"
+            f"{did_you_mean(model, HYSTERESIS_MODELS)}"
+            f"; known models: {', '.join(HYSTERESIS_MODELS)}"
+        )
+
+
+def _defaults(rated: float, k1: float, given) -> dict:
+    """Bouc-Wen by default (hysteresis loss ~1 arcmin for size 40-50 units, ratio >= 80); the
+    Dahl and LuGre defaults when the user names those models."""
+    model = given.get("model", "bouc_wen")
+    _check_model(model)
+    stiff = 1.0 / k1
+    level = 0.025 * rated
+    if model == "dahl":
+        return dict(model="dahl", sigma=0.5 * stiff, level=level)
+    if model == "lugre":
+        return dict(model="lugre", sigma0=0.5 * stiff, level=level, peak=1.5 * level, speed=1e-3)
+    return dict(model="bouc_wen", a=0.5 * stiff, beta=0.5 * stiff / level, gamma=0.0, n=1)
+
+
+def _build(name: str, p: dict):
+    model = p["model"]
+    _check_model(model)
+    if model == "bouc_wen":
+        n = p["n"]
+        if not isinstance(n, int) or isinstance(n, bool) or n < 1:
+            raise ConfigError(
+                f"effect 'hysteresis': Bouc-Wen exponent n must be an int >= 1, got {n!r}"
+            )
+        require(name, "a", p["a"], positive=True, shape=())
+        require(name, "beta", p["beta"], shape=())
+        require(name, "gamma", p["gamma"], shape=())
+        b, g = concrete(p["beta"]), concrete(p["gamma"])
+        if b is not None and g is not None and not (b + g > 0 and b - g >= 0):
+            raise ConfigError(
+                f"effect 'hysteresis': Bouc-Wen needs beta + gamma > 0 and beta >= gamma "
+                f"(a bounded, dissipative loop), got beta={float(b)}, gamma={float(g)}"
+            )
+        return BoucWen(f64(p["a"]), f64(p["beta"]), f64(p["gamma"]), n)
+    if model == "dahl":
+        require(name, "sigma", p["sigma"], positive=True, shape=())
+        require(name, "level", p["level"], positive=True, shape=())
+        return Dahl(f64(p["sigma"]), f64(p["level"]))
+    for f in ("sigma0", "level", "peak", "speed"):
+        require(name, f, p[f], positive=True, shape=())
+    return LuGre(f64(p["sigma0"]), f64(p["level"]), f64(p["peak"]), f64(p["speed"]))
+
+
+class HysteresisFamily(AbstractFamily):
+    """Hysteresis: plant `hysteresis` (Bouc-Wen, Dahl, LuGre); term `Hysteresis` (a Dahl state
+    of the torque path); a grid of Dahl scales."""
+
+    name: ClassVar[str] = "hysteresis"
+    terms: ClassVar[tuple] = (Hysteresis, TwistHysteresis)
+    plant_effects: ClassVar[tuple] = (PlantEffect("hysteresis", "hysteresis", _defaults, _build),)
+    discover_families: ClassVar[tuple] = ("hysteresis:torque",)
+    vocabulary: ClassVar[str] = "hysteresis:torque"
+    options: ClassVar[dict] = {"dahl_fractions": (0.01, 0.025, 0.05, 0.1, 0.2)}
+
+    def candidates(self, ctx):
+        if not ctx.wants("hysteresis:torque"):
+            return []
+        # the state follows the measured deformation (stable, needs no estimate)
+        k = twist_compliance(ctx.sig, ctx.torque, ctx.rated_torque)
+        out = []
+        for frac in ctx.option(self, "dahl_fractions"):
+            term = TwistHysteresis(torque_scale=frac * ctx.rated_torque, compliance=k)
+            out.append(Candidate(term.key, term.key, term))
+        return out

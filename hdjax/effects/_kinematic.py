@@ -1,0 +1,231 @@
+r"""Kinematic error: the output does not follow the input exactly, periodically in the angles.
+
+The transmission error of a harmonic drive is periodic in the wave-generator and flexspline
+angles (tooth placement, cam eccentricity, the bearing); Song et al. write it as a Fourier
+series of both, eq. (9), in the twist model eq. (10). Here the orders are free floats: besides
+the integers, the combination orders $2 \pm 2/N$ and $1 \pm 1/N$ of the cam's two lobes meeting
+the flexspline appear on real joints. The plant adds $\sum_j a_j \sin(o_j\theta + \varphi_j)$ of
+the recorded motor angle (`harmonic_m`) and load angle (`harmonic_l`) to the deflection; the
+regression term is a $\cos, \sin$ pair per order; the residual loop takes its orders from the
+order spectrum of the twist residual (peaks, refined) merged with the integers and the
+combination orders.
+
+References: Song et al. 2019, eq. (9).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import _trig
+from .._custom_types import Array, Float
+from .._trig import sincos
+from ._base import (
+    AbstractFamily,
+    AbstractPlantEffect,
+    AbstractTorqueFreeTerm,
+    Candidate,
+    PlantEffect,
+    fmt,
+    require,
+    vector,
+)
+
+
+def harmonic_pairs(u, order: int):
+    r"""$[(\cos nu, \sin nu)]_{n=1..order}$ by the angle-addition recurrence from one `sincos`."""
+    # The barrier materialises sin/cos once: without it XLA fuses (and so recomputes) them into
+    # every column that a stacked design materialises separately.
+    s1, c1 = jax.lax.optimization_barrier(sincos(u))
+    out = [(c1, s1)]
+    for _ in range(1, order):
+        c, s = out[-1]
+        out.append((c * c1 - s * s1, s * c1 + c * s1))
+    return out
+
+
+class PaperFourier(AbstractTorqueFreeTerm):
+    """Kinematic error in the paper's form, eq. (9), without its constant $a_0$.
+
+    For $n = 1..$`order`: $\\cos(n\\theta_{fso}\\omega_{fso}), \\sin(n\\theta_{fso}\\omega_{fso}),
+    \\cos(n\\theta_{wgi}\\omega_{wgi}), \\sin(n\\theta_{wgi}\\omega_{wgi})$ with coefficients
+    $a_n, b_n, c_n, d_n$. (The argument angle-times-velocity is the paper's; plain harmonics of
+    the angles are [`hdjax.compliance.Harmonics`][].)
+    """
+
+    order: int = eqx.field(default=3, static=True)
+
+    @property
+    def key(self) -> str:
+        return "kinematic:paper"
+
+    def names(self) -> tuple[str, ...]:
+        out = []
+        for n in range(1, self.order + 1):
+            out += [f"a{n}", f"b{n}", f"c{n}", f"d{n}"]
+        return tuple(out)
+
+    def column_list(self, sig) -> list:
+        hl = harmonic_pairs(sig.theta_l * sig.omega_l, self.order)
+        hm = harmonic_pairs(sig.theta_m * sig.omega_m, self.order)
+        cols = []
+        for (cl, sl), (cm, sm) in zip(hl, hm):
+            cols += [cl, sl, cm, sm]
+        return cols
+
+    def columns(self, sig, torque=None):
+        return jnp.stack(self.column_list(sig), axis=1)
+
+    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+        ul = np.asarray(sig.theta_l) * np.asarray(sig.omega_l)
+        um = np.asarray(sig.theta_m) * np.asarray(sig.omega_m)
+        cols = []
+        for n in range(1, self.order + 1):
+            cols += [np.cos(n * ul), np.sin(n * ul), np.cos(n * um), np.sin(n * um)]
+        return np.column_stack(cols)
+
+
+class Harmonics(AbstractTorqueFreeTerm):
+    """Harmonics of one angle at a list of (possibly non-integer) orders: $\\cos(k\\theta),
+    \\sin(k\\theta)$ per order $k$ - the kinematic error as a function of angle alone."""
+
+    signal: str = eqx.field(default="theta_m", static=True)
+    orders: tuple[float, ...] = eqx.field(default=(1.0, 2.0), static=True)
+
+    @property
+    def key(self) -> str:
+        return ",".join(f"harmonic:{self.signal}:{fmt(k)}" for k in self.orders)
+
+    def names(self) -> tuple[str, ...]:
+        out = []
+        for k in self.orders:
+            out += [f"cos({fmt(k)}*{self.signal})", f"sin({fmt(k)}*{self.signal})"]
+        return tuple(out)
+
+    def column_list(self, sig) -> list:
+        theta = sig.get(self.signal)
+        cols = []
+        for k in self.orders:
+            s, c = sincos(k * theta)
+            cols += [c, s]
+        return cols
+
+    def columns(self, sig, torque=None):
+        return jnp.stack(self.column_list(sig), axis=1)
+
+    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+        th = np.asarray(sig.get(self.signal))
+        return np.column_stack([f(k * th) for k in self.orders for f in (np.cos, np.sin)])
+
+
+class KinematicHarmonics(AbstractPlantEffect):
+    r"""Kinematic error $\sum_j a_j \sin(o_j \theta + \varphi_j)$ of one angle [rad].
+
+    Song et al. eq. (9) writes the kinematic error as a Fourier series of the output and the input
+    angle; here orders are free floats (e.g. $2 - 2/N$). The angle is the *recorded* one (motor
+    for `harmonic_m`, load for `harmonic_l`).
+
+    **Arguments:**
+
+    - `orders`: harmonic orders, shape `(n,)`.
+    - `amplitudes`: amplitudes [rad of twist], shape `(n,)`, non-negative.
+    - `phases`: phases [rad], shape `(n,)`.
+    """
+
+    orders: Float[Array, " n"]
+    amplitudes: Float[Array, " n"]
+    phases: Float[Array, " n"]
+
+    def reciprocals(self):
+        return {}
+
+    def __call__(self, angle, inv=None):
+        # a Python sum over the (static) number of harmonics keeps XLA from a reduction
+        terms = [
+            self.amplitudes[j] * _trig.sin(self.orders[j] * angle + self.phases[j])
+            for j in range(self.orders.shape[0])
+        ]
+        return sum(terms[1:], terms[0]) if terms else jnp.zeros_like(angle)
+
+
+def _build(name: str, p: dict) -> KinematicHarmonics:
+    orders = vector(name, "orders", p["orders"])
+    amps = vector(name, "amplitudes", p["amplitudes"])
+    phases = vector(name, "phases", p["phases"])
+    n = orders.shape
+    require(name, "orders", orders, shape=n)
+    require(name, "amplitudes", amps, nonneg=True, shape=n)
+    require(name, "phases", phases, shape=n)
+    return KinematicHarmonics(orders, amps, phases)
+
+
+_ARCMIN = np.pi / (180.0 * 60.0)
+
+
+def harmonic_key(signal: str, order: float) -> str:
+    """The vocabulary key of one harmonic order of one angle."""
+    return f"harmonic:{signal}:{fmt(round(order, 6))}"
+
+
+class KinematicFamily(AbstractFamily):
+    """Kinematic error: plant `harmonic_m`, `harmonic_l`; terms `Harmonics`, `PaperFourier`;
+    candidates from the order spectrum of the residual (`harmonic:theta_m:ORDER`, ...)."""
+
+    name: ClassVar[str] = "kinematic"
+    terms: ClassVar[tuple] = (PaperFourier, Harmonics)
+    # transmission accuracy ~1 arcmin peak-to-peak split over motor- and load-side harmonics
+    plant_effects: ClassVar[tuple] = (
+        PlantEffect(
+            "harmonic_m",
+            "kinematic_m",
+            lambda rated, k1, given: dict(orders=[2.0], amplitudes=[0.15 * _ARCMIN], phases=[0.3]),
+            _build,
+        ),
+        PlantEffect(
+            "harmonic_l",
+            "kinematic_l",
+            lambda rated, k1, given: dict(
+                orders=[1.0, 2.0], amplitudes=[0.2 * _ARCMIN, 0.1 * _ARCMIN], phases=[0.0, 1.1]
+            ),
+            _build,
+        ),
+    )
+    discover_families: ClassVar[tuple] = ("harmonic:theta_m", "harmonic:theta_l")
+    vocabulary: ClassVar[str] = "harmonic:theta_m:ORDER, harmonic:theta_l:ORDER"
+    options: ClassVar[dict] = {
+        "orders_m": (0.5, 8.0),
+        "orders_l": (0.5, 12.0),
+        "integer_orders_m": (1.0, 2.0, 3.0, 4.0),
+        "integer_orders_l": (1.0, 2.0, 3.0, 4.0),
+        "n_peaks": 3,
+    }
+
+    def candidates(self, ctx):
+        existing = {"theta_m": [], "theta_l": []}
+        for term in ctx.existing_terms:
+            if isinstance(term, Harmonics):
+                existing[term.signal] += list(term.orders)
+        out = []
+        for signal, suffix in (("theta_m", "m"), ("theta_l", "l")):
+            if f"harmonic:{signal}" not in ctx.families:
+                continue
+            named = list(ctx.option(self, f"integer_orders_{suffix}"))
+            if signal == "theta_m":
+                r = ctx.ratio
+                named += [2.0 - 2.0 / r, 2.0 + 2.0 / r, 1.0 - 1.0 / r, 1.0 + 1.0 / r]
+            orders = ctx.spectrum_orders(
+                signal,
+                ctx.option(self, f"orders_{suffix}"),
+                named,
+                existing[signal],
+                ctx.option(self, "n_peaks"),
+            )
+            for k, origin in orders:
+                term = Harmonics(signal=signal, orders=(float(round(k, 6)),))
+                out.append(Candidate(harmonic_key(signal, k), f"harmonic:{signal}", term, origin))
+        return out

@@ -1,0 +1,52 @@
+r"""Offset: the constant of the twist model.
+
+$k_0 = \omega_0/N + a_0$ (Song et al. 2019, eq. (10)): the wave generator's deformation at zero
+current and the kinematic error's mean, which also absorbs the encoders' zero offsets. It is
+part of every model, never simulated on its own (the plant's angles start at zero) and never
+proposed by the residual loop.
+
+References: Song et al. 2019, eq. (10).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import jax.numpy as jnp
+import numpy as np
+
+from ._base import AbstractFamily, AbstractTorqueFreeTerm
+
+
+class Constant(AbstractTorqueFreeTerm):
+    """Constant offset $k_0 = \\omega_0/N + a_0$ (eq. (10)); also absorbs encoder offsets."""
+
+    @property
+    def key(self) -> str:
+        return "constant"
+
+    def names(self) -> tuple[str, ...]:
+        return ("k0",)
+
+    def column_list(self, sig) -> list:
+        return [jnp.ones((sig.n_samples,), jnp.float64)]
+
+    def columns(self, sig, torque=None):
+        return jnp.ones((sig.n_samples, 1), jnp.float64)
+
+    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+        return np.ones((sig.n_samples, 1))
+
+
+class OffsetFamily(AbstractFamily):
+    """The constant of the twist model (no plant effect, not discovered)."""
+
+    name: ClassVar[str] = "offset"
+    terms: ClassVar[tuple] = (Constant,)
+    plant_effects: ClassVar[tuple] = ()
+    discover_families: ClassVar[tuple] = ()
+    vocabulary: ClassVar[str] = ""
+    options: ClassVar[dict] = {}
+
+    def candidates(self, ctx):
+        return []

@@ -1,0 +1,128 @@
+r"""Wave-generator compliance: the elliptical cam and its bearing deform with the torque they carry.
+
+Song et al. model the wave generator's torsional deformation as a polynomial in the motor
+current, $\Delta\theta_{wg} = \sum_{i=1}^m \omega_i I^i$ (eq. (8)), which enters the joint
+twist divided by the ratio (eq. (6)). The plant writes the same polynomial in the torque the
+wave generator transmits, $u = T/N$, and adds $\Delta\theta_{wg}(u)/N$ in series with the
+flexspline. The regression term is eq. (8) itself, a base column group of every paper model.
+
+References: Song et al. 2019, eqs. (6), (8), (10).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Array, Float
+from .._errors import ConfigError
+from ._base import (
+    AbstractFamily,
+    AbstractPlantEffect,
+    AbstractTorqueFreeTerm,
+    PlantEffect,
+    check_positive,
+    concrete,
+    vector,
+)
+
+
+class CurrentPolynomial(AbstractTorqueFreeTerm):
+    """Wave-generator deformation as a polynomial in current, eq. (8), without its constant.
+
+    Columns $I, I^2, \\dots, I^p$; the fitted coefficient of $I^i$ is $\\omega_i / N$ (eq. (10)).
+    `scale` divides the current first (the rated current, say) so high powers stay O(1).
+    """
+
+    order: int = eqx.field(default=6, static=True)
+    scale: float = eqx.field(default=1.0, static=True)
+
+    def __check_init__(self):
+        check_positive("CurrentPolynomial", "scale", self.scale)
+
+    @property
+    def key(self) -> str:
+        return "current:poly"
+
+    def names(self) -> tuple[str, ...]:
+        return tuple(f"w{i}" for i in range(1, self.order + 1))
+
+    def column_list(self, sig) -> list:
+        x = sig.current / self.scale
+        out = [x]
+        for _ in range(1, self.order):
+            out.append(out[-1] * x)
+        return out
+
+    def columns(self, sig, torque=None):
+        return jnp.stack(self.column_list(sig), axis=1)
+
+    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+        x = np.asarray(sig.current) / self.scale
+        return np.column_stack([x ** (i + 1) for i in range(self.order)])
+
+
+class WaveGenerator(AbstractPlantEffect):
+    r"""Wave-generator compliance, Song et al. eq. (8) with the WG torque in place of the current.
+
+    $\Delta\theta_{wg} = \sum_{j=1}^m w_j u^j$ [rad at the motor side], $u = T/N$ [N·m] the torque
+    the wave generator transmits. Its share of the joint deflection is $\Delta\theta_{wg}/N$
+    (eq. (6)). `coefficients` are $w_1..w_m$; the polynomial must increase on the working range.
+    """
+
+    coefficients: Float[Array, " m"]
+
+    def reciprocals(self):
+        return {}
+
+    def deflection(self, u, inv=None):
+        # Horner: u * (w1 + u * (w2 + ...)), exact and NaN-free at u = 0
+        acc = jnp.zeros_like(u)
+        for j in range(self.coefficients.shape[0] - 1, -1, -1):
+            acc = acc * u + self.coefficients[j]
+        return acc * u
+
+    def slope(self, u, inv=None):
+        acc = jnp.zeros_like(u)
+        for j in range(self.coefficients.shape[0] - 1, -1, -1):
+            acc = acc * u + (j + 1.0) * self.coefficients[j]
+        return acc
+
+
+def _build(name: str, p: dict) -> WaveGenerator:
+    w = vector(name, "coefficients", p["coefficients"])
+    arr = concrete(w)
+    if arr is not None and (arr.shape[0] < 1 or arr[0] <= 0):
+        raise ConfigError(
+            "effect 'wg_compliance': the linear coefficient w_1 must be positive (the wave "
+            f"generator deflects with its torque), got coefficients {arr.tolist()}"
+        )
+    return WaveGenerator(w)
+
+
+WG_COMPLIANCE = "wg_compliance"
+"""The plant's name of the wave-generator compliance."""
+
+
+class WaveGeneratorFamily(AbstractFamily):
+    """Wave-generator compliance: plant `wg_compliance`, base term `CurrentPolynomial`."""
+
+    name: ClassVar[str] = "wave_generator"
+    terms: ClassVar[tuple] = (CurrentPolynomial,)
+    plant_effects: ClassVar[tuple] = (
+        PlantEffect(
+            WG_COMPLIANCE,
+            "wave_generator",
+            lambda rated, k1, given: dict(coefficients=[0.02, 0.0, 0.002]),
+            _build,
+        ),
+    )
+    discover_families: ClassVar[tuple] = ()
+    vocabulary: ClassVar[str] = ""
+    options: ClassVar[dict] = {}
+
+    def candidates(self, ctx):
+        return []

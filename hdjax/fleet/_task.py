@@ -1,0 +1,209 @@
+"""One fleet task: a (joint, log) pair calibrated, calibrated and discovered, or estimated.
+
+[`run_task`][] takes and returns plain data (dicts of numbers and strings), so a Dask worker in
+another process, or on another machine, can run it; any error becomes the row's one-line
+`error` with `status = "failed"`, never an exception that stops the other tasks.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import warnings
+
+import numpy as np
+
+ARCSEC = 648000.0 / np.pi
+_CACHE_SET: list = []
+
+
+def _one_line(err: BaseException) -> str:
+    from .._errors import HdjaxError
+
+    text = " ".join(str(err).split())
+    return text if isinstance(err, HdjaxError) else f"{type(err).__name__}: {text}"
+
+
+def run_task(spec: dict, cache_dir: str | None = None) -> dict:
+    """Run one task of a fleet manifest (see [`hdjax.fleet.load_manifest`][]).
+
+    **Arguments:**
+
+    - `spec`: the task's plain-data description ([`hdjax.fleet.Task`][]`.spec`).
+    - `cache_dir`: JAX's persistent compilation cache for this worker process, or `None`.
+
+    **Returns:** the task's row: `joint`, `log`, `date`, `task`, `status` (`"ok"` or
+    `"failed"`), `error`, `seconds`, `n_samples`, the calibrated `coefficients` (term name to
+    value), `twist_rms_arcsec`, `condition`, and for discover the `effects` added, their
+    `amplitudes` (twist RMS of each effect on the training part [arcsec], with an interval
+    when the residual loop gives one) and the TEST torque errors before and after.
+    """
+    if cache_dir and not _CACHE_SET:
+        from .._cache import enable_compilation_cache
+
+        enable_compilation_cache(cache_dir)
+        _CACHE_SET.append(cache_dir)
+    t0 = time.perf_counter()
+    row = {
+        "joint": spec["joint_name"],
+        "log": spec["log"],
+        "date": spec["date"],
+        "task": spec["task"],
+        "status": "ok",
+        "error": "",
+        "worker_pid": os.getpid(),
+    }
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            row.update(_RUNNERS[spec["task"]](spec))
+        row["warnings"] = [" ".join(str(w.message).split()) for w in caught][:20]
+    except Exception as err:  # noqa: BLE001 - every failure becomes the task's row
+        row.update(status="failed", error=_one_line(err))
+    row["seconds"] = time.perf_counter() - t0
+    return row
+
+
+def _joint_and_map(spec):
+    from .._io import ColumnMap
+    from .._joint import Joint
+
+    joint = Joint.from_dict(spec["joint"])
+    cmap = ColumnMap.from_dict(spec["columns"]) if spec["columns"] else None
+    return joint, cmap
+
+
+def _coefficients(model) -> dict:
+    coef = np.asarray(model.coef)
+    return {n: float(c) for n, c, a in zip(model.term_names, coef, model.active) if a}
+
+
+def _structure(spec, joint, scale):
+    from ..compliance import ComplianceModel
+
+    m = spec["model_structure"]
+    return ComplianceModel.paper(
+        joint,
+        n_segments=m["n_segments"],
+        poly_order=m["poly_order"],
+        current_scale=scale,
+        kinematic=m["kinematic"],
+        fourier_order=m["fourier_order"],
+        per_segment=m["per_segment"],
+    )
+
+
+def _calibrate(spec) -> dict:
+    from .._io import load_recording
+    from ..compliance import RecordingStream, calibrate_lstsq, calibrate_stream
+    from ..compliance._stream_fit import peak_abs
+
+    joint, cmap = _joint_and_map(spec)
+    chunk = spec["settings"]["chunk"]
+    if chunk:
+        stream = RecordingStream.from_files([spec["log"]], cmap, chunk=chunk)
+        scale = peak_abs(stream) or 1.0
+        res = calibrate_stream(_structure(spec, joint, scale), stream, chunk=chunk)
+    else:
+        rec = load_recording(spec["log"], cmap)
+        scale = float(np.max(np.abs(np.asarray(rec.current)))) or 1.0
+        res = calibrate_lstsq(_structure(spec, joint, scale), rec)
+    return {
+        "n_samples": res.n_samples,
+        "coefficients": _coefficients(res.model),
+        "twist_rms_arcsec": res.residual_rms * ARCSEC,
+        "condition": res.condition,
+    }
+
+
+def _effect_amplitudes(result, train) -> list[dict]:
+    """Each added effect's twist contribution on TRAIN (RMS, arcsec), from the final model."""
+    from ..compliance import signals_from_recording
+
+    model = result.final_model
+    sig = signals_from_recording(train, model.ratio, model.twist_sign, velocity=model.velocity)
+    coef = np.asarray(model.coef)
+    i = model.n_coef - model.n_effect
+    by_key = {}
+    for term in model.effect_terms:
+        m = len(term.names())
+        cols = np.asarray(term.columns(sig, train.torque))
+        by_key[term.key] = float(np.std(cols @ coef[i : i + m])) * ARCSEC
+        i += m
+    out = []
+    for step in result.steps:
+        interval = getattr(step, "interval", None)
+        lo, hi = (None, None) if interval is None else (float(interval[0]), float(interval[1]))
+        out.append(
+            {
+                "effect": step.key,
+                "amplitude_arcsec": by_key.get(step.key),
+                "low": lo,
+                "high": hi,
+                "cv_gain": float(step.cv_gain),
+            }
+        )
+    return out
+
+
+def _calibrate_discover(spec) -> dict:
+    from .._io import load_recording
+    from .._joint import Joint
+    from ..discover import DiscoverOptions, discover
+
+    joint = Joint.from_dict(spec["joint"])
+    _, cmap = _joint_and_map(spec)
+    rec = load_recording(spec["log"], cmap)
+    train, test = rec.split(1.0 - spec["settings"]["split"])
+    m, s = spec["model_structure"], spec["settings"]
+    options = DiscoverOptions(
+        max_effects=s["max_effects"],
+        min_gain=s["min_gain"],
+        n_segments=m["n_segments"],
+        poly_order=m["poly_order"],
+        fourier_order=m["fourier_order"],
+        per_segment=m["per_segment"],
+    )
+    result = discover(train, test, joint, options)
+    twist = result.steps[-1].twist_rms_arcsec if result.steps else result.baseline_twist_rms_arcsec
+    return {
+        "n_samples": rec.n_samples,
+        "coefficients": _coefficients(result.final_model),
+        "twist_rms_arcsec": float(twist),
+        "effects": list(result.effects),
+        "amplitudes": _effect_amplitudes(result, train),
+        "baseline_test_rms_Nm": float(result.baseline.rms),
+        "test_rms_Nm": float(result.final.rms),
+        "test_max_Nm": float(result.final.max),
+    }
+
+
+def _estimate(spec) -> dict:
+    from .._io import load_recording
+    from .._metrics import error_metrics
+    from ..compliance import estimate_torque
+    from ..config import check_compatible, load_model
+
+    joint, cmap = _joint_and_map(spec)
+    saved = load_model(spec["model_file"])
+    if saved.compliance is None:
+        raise ValueError(f"{spec['model_file']}: holds no compliance model")
+    rec = load_recording(spec["log"], cmap)
+    check_compatible(saved, rec, joint)
+    est = estimate_torque(saved.compliance, rec)
+    out = {
+        "n_samples": rec.n_samples,
+        "coefficients": _coefficients(saved.compliance),
+        "in_range_pct": 100.0 * float(np.mean(np.asarray(est.in_range))),
+    }
+    if rec.torque is not None:
+        m = error_metrics(np.asarray(est.torque), np.asarray(rec.torque), joint.rated_torque)
+        out.update(test_rms_Nm=float(m.rms), test_max_Nm=float(m.max))
+    return out
+
+
+_RUNNERS = {
+    "calibrate": _calibrate,
+    "calibrate+discover": _calibrate_discover,
+    "estimate": _estimate,
+}

@@ -1,0 +1,179 @@
+"""SIGINT and SIGTERM at any moment: exit code 130 or 143, one line on stderr, no partial result
+(a sweep keeps its finished members). Real processes, since signals are the point; few of them."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+CONFIG = """\
+[experiment]
+name = "sig"
+[joint]
+ratio = 160
+rated_torque = 400
+[data]
+kind = "synthetic"
+n_samples = 4000
+[model]
+poly_order = 2
+kinematic = "none"
+per_segment = false
+n_segments = 3
+[network]
+enabled = false
+[outputs]
+figures = false
+timing = true
+timing_repeats = 1000000
+"""
+
+pytestmark = pytest.mark.skipif(
+    not Path("/proc/self/maps").exists(), reason="watches /proc/PID/maps for start-up"
+)
+
+
+def _start(tmp_path, *args):
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    return subprocess.Popen(
+        [sys.executable, "-m", "hdjax", *args],
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def _wait_for(cond, proc, timeout=120.0):
+    t0 = time.monotonic()
+    while not cond():
+        assert proc.poll() is None, f"ended early: {proc.communicate()}"
+        assert time.monotonic() - t0 < timeout, "timed out"
+        time.sleep(0.005)
+
+
+def _loading_jax(proc) -> bool:
+    """The process is importing JAX (its compiled extension is mapped): start-up."""
+    try:
+        maps = Path(f"/proc/{proc.pid}/maps").read_text()
+    except OSError:
+        return False
+    return "jaxlib" in maps
+
+
+def _finish(proc, sig):
+    proc.send_signal(sig)
+    out, err = proc.communicate(timeout=120)
+    return proc.returncode, err
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_signal_during_start_up(tmp_path, sig, code):
+    (tmp_path / "cfg.toml").write_text(CONFIG)
+    proc = _start(tmp_path, "run", "cfg.toml", "--out", "o", "-q")
+    _wait_for(lambda: _loading_jax(proc), proc)
+    rc, err = _finish(proc, sig)
+    assert rc == code, err
+    assert err.strip().count("\n") == 0 and "Traceback" not in err, err
+    assert "interrupted" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cfg.toml"]
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_signal_mid_run_removes_the_staging_folder(tmp_path, sig, code):
+    (tmp_path / "cfg.toml").write_text(CONFIG)
+    proc = _start(tmp_path, "run", "cfg.toml", "--out", "o")
+    staging = tmp_path / f".o.tmp-{proc.pid}"
+    # the timing stage (a million repeats) keeps the run busy once it has started writing
+    _wait_for(lambda: staging.exists(), proc)
+    _wait_for(
+        lambda: False if proc.stderr is None else "estimating torque with the model" in _peek(proc),
+        proc,
+    )
+    rc, err = _finish(proc, sig)
+    assert rc == code, err
+    assert err.strip().splitlines()[-1] == f"hdjax: interrupted ({sig.name})", err
+    assert "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cfg.toml"]
+
+
+_seen: dict[int, str] = {}
+
+
+def _peek(proc) -> str:
+    """Progress lines so far (read line by line without blocking past one line)."""
+    import select
+
+    text = _seen.setdefault(proc.pid, "")
+    while select.select([proc.stderr], [], [], 0)[0]:
+        line = proc.stderr.readline()
+        if not line:
+            break
+        text += line
+    _seen[proc.pid] = text
+    return text
+
+
+def test_sigterm_mid_sweep_keeps_finished_members(tmp_path):
+    cfg = CONFIG.replace("n_samples = 4000", "n_samples = 20000").replace(
+        "timing = true", "timing = false"
+    )
+    (tmp_path / "cfg.toml").write_text(cfg)
+    values = "1,3,5,7,9,11,13,15,17,19"
+    proc = _start(
+        tmp_path,
+        "sweep",
+        "cfg.toml",
+        "--out",
+        "sw",
+        "-q",
+        "--setting",
+        "model.n_segments",
+        "--values",
+        values,
+    )
+    members = tmp_path / "sw.partial" / "members"
+    _wait_for(lambda: members.is_dir() and any(members.glob("*.json")), proc)
+    rc, err = _finish(proc, signal.SIGTERM)
+    assert rc == 143, err
+    assert err.strip() == "hdjax: interrupted (SIGTERM)"
+    assert not (tmp_path / "sw").exists()
+    kept = sorted(p.name for p in members.glob("*.json"))
+    assert 1 <= len(kept) < 10 and kept[0].startswith("000_")
+    leftovers = [p for p in tmp_path.rglob("*") if ".tmp" in p.name]
+    assert not leftovers
+
+
+def test_a_swallowed_interrupt_still_ends_the_command(tmp_path, monkeypatch, capsys):
+    """Python drops an exception raised inside some callbacks (JAX's garbage-collection callback
+    is one); the signal is remembered and ends the command at its next step, with no result."""
+    from hdjax.cli import main
+    from hdjax.config import _pipeline
+
+    (tmp_path / "cfg.toml").write_text(CONFIG.replace("timing = true", "timing = false"))
+    real = _pipeline.calibrate
+
+    def calibrate_with_a_swallowed_ctrl_c(*a, **k):
+        try:
+            signal.raise_signal(signal.SIGINT)
+        except BaseException:  # what a callback that swallows exceptions does
+            pass
+        return real(*a, **k)
+
+    monkeypatch.setattr(_pipeline, "calibrate", calibrate_with_a_swallowed_ctrl_c)
+    before = signal.getsignal(signal.SIGINT)
+    code = main(["run", str(tmp_path / "cfg.toml"), "--out", str(tmp_path / "o"), "-q"])
+    assert code == 130
+    assert capsys.readouterr().err.strip() == "hdjax: interrupted (SIGINT)"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cfg.toml"]
+    assert signal.getsignal(signal.SIGINT) is before  # the handlers are restored
+    from hdjax._interrupts import pending
+
+    assert pending() is None  # and the next command in this process starts clean
