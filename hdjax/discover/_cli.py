@@ -82,7 +82,7 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
         type=float,
         default=0.05,
         help="least cross-validated share of the twist error an effect must remove, "
-        "overall (and half of it in every fold) (default 0.05)",
+        "in the standard folds and in at least 70 %% of resampled fold assignments (default 0.05)",
     )
     p.add_argument(
         "--ignore-column",

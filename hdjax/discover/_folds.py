@@ -19,6 +19,7 @@ import numpy as np
 from .._features import find_gaps
 
 GAP_FACTOR = 3.0
+MAX_BLOCKS = 250
 
 
 def segment_starts(t) -> np.ndarray:
@@ -89,12 +90,13 @@ def fold_assignment(blocks: np.ndarray, n_folds: int, *, rng=None) -> list[np.nd
 
 
 def cv_block_length(residual, starts, n_folds: int, minimum: int) -> tuple[int, str | None]:
-    """Block length for the folds: the correlation length, at least `minimum` samples, and at
-    most what leaves two blocks per fold; a note when the cap binds."""
+    """Block length for the folds: the correlation length, at least `minimum` samples and
+    `n / MAX_BLOCKS`, at most what leaves two blocks per fold; a note when the cap binds."""
     n = np.asarray(residual).size
     corr = correlation_length(residual, starts)
     cap = max(1, n // (2 * n_folds))
-    length = max(minimum, corr)
+    # long records: at most MAX_BLOCKS blocks (the stability scores keep a Gram matrix each)
+    length = max(minimum, corr, -(-n // MAX_BLOCKS))
     note = None
     if length > cap:
         note = (
