@@ -27,10 +27,9 @@ import hdjax
 from hdjax import plant
 from hdjax.compliance import ColumnTimesTorque, Coulomb, Harmonics
 from hdjax.discover import DiscoverOptions, discover, refit_structure
-from hdjax.discover._folds import correlation_length
 from hdjax.discover._loop import _as_data, calibrate_baseline
 from hdjax.discover._pipeline import calibrate, design, estimate
-from hdjax.discover._uncertainty import effect_intervals
+from hdjax.discover._uncertainty import bootstrap_length, effect_intervals
 from hdjax.effects import TwistHysteresis, twist_compliance
 
 from .discover_batch import simulate_draws
@@ -150,7 +149,7 @@ def _coverage(kind, n=60):
         model, est = calibrate(base.with_effects(term), data, [], estimate(base, data))
         a = design(model, *data.pair(est))
         resid = data.twist - a @ np.asarray(model.coef)
-        length = 2 * correlation_length(resid, data.starts)
+        length = bootstrap_length(OPTIONS.block, resid, data.starts)  # the loop's rule
         iv = effect_intervals(model, a, data, est, length=length)[0]
         lo, hi = np.asarray(iv["arcsec_ci95"]) * ARCSEC if kind == "harmonic" else iv["nm_ci95"]
         hits.append(lo <= truth <= hi)

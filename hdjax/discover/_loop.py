@@ -65,7 +65,7 @@ from ._select import (
     sindy_select,
 )
 from ._spectrum import OrderSpectrum, order_spectrum
-from ._uncertainty import effect_intervals
+from ._uncertainty import bootstrap_length, effect_intervals
 from ._unexplained import unexplained_structure
 
 ARCSEC = 180.0 * 3600.0 / np.pi
@@ -507,7 +507,7 @@ def discover(
         sig_d, torque = data.pair(est_train)
         a_final = design(model, sig_d, torque)
         res_final = data.twist - a_final @ np.asarray(model.coef)
-        length = max(block, 2 * correlation_length(res_final, data.starts))
+        length = bootstrap_length(block, res_final, data.starts)
         intervals = effect_intervals(model, a_final, data, est_train, length=length)
         for s_, iv in zip(steps, intervals):
             s_.amplitude = iv

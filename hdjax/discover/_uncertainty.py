@@ -31,6 +31,14 @@ N_BOOTSTRAP = 400
 LEVEL = 0.95
 
 
+def bootstrap_length(cv_block: int, residual, starts) -> int:
+    """Bootstrap block length: the cross-validation block, and at least twice the residual's
+    correlation length."""
+    from ._folds import correlation_length
+
+    return int(max(cv_block, 2 * correlation_length(residual, starts)))
+
+
 def _amplitude(term, beta: np.ndarray, peak: np.ndarray) -> np.ndarray:
     """Amplitudes of coefficient rows `beta` (shape `(..., m)`)."""
     if type(term).__name__ == "Harmonics" and beta.shape[-1] == 2:
