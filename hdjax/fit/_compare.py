@@ -24,6 +24,7 @@ from .. import compliance as hc, network as hn, plant
 from .._features import signals
 from .._joint import Joint
 from .._metrics import error_metrics
+from .._plotting import pyplot
 from .._solution import RESULTS, Solution
 from ._estimators import ComplianceEstimator, HybridEstimator, NetworkEstimator
 from ._hybrid import fit_hybrid, make_hybrid
@@ -340,10 +341,7 @@ def format_table(result: dict) -> str:
 
 def plot_comparison(result: dict, path) -> None:
     """Grouped bars of RMS and maximum error (% of rated torque) per scenario and method."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     rows = result["rows"]
     methods = list(dict.fromkeys(r["method"] for r in rows))
