@@ -33,7 +33,6 @@ from ._experiments import (
 from ._gauges import FlexsplineGeometry, misalignment_error_index, resolved_torque_gain
 from ._stability import loop_poles
 
-
 _pyplot = pyplot
 
 
