@@ -348,8 +348,8 @@ def _members_nested(exp, setting, values, todo, cfgs, ds, progress):
     """Polynomial / Fourier orders: one Gram pass, per-member solves, one batched estimate."""
     import numpy as np
 
+    from ..compliance._nested import batched_estimates, nested_fit
     from ..config import _pipeline as P
-    from ._sweep_fit import batched_estimates, nested_fit
 
     scale = P.current_scale(exp, ds.train)
     vmax = max(values[i] for i in todo)
