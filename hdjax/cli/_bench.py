@@ -61,7 +61,7 @@ def bench_sweep(n_samples: int, repeats: int, progress=None) -> dict:
     from ..compliance import ComplianceModel, calibrate_lstsq, estimate_torque
     from ..compliance._nested import nested_fit
     from ..config import synthetic_recording
-    from ..config._pipeline import PAPER_MS_PER_100, stacked_signals
+    from ..pipelines._paper import PAPER_MS_PER_100, stacked_signals
 
     say = progress or (lambda m: None)
     joint = Joint(ratio=160.0, rated_torque=400.0)
