@@ -39,7 +39,6 @@ QUICK = {
     "bench_sweep.py": ["--samples", "20000", "--repeats", "2"],
     "bench_network.py": ["--n-train", "2000", "--epochs", "50"],
     "compare_methods.py": ["--duration", "10", "--steps", "300"],
-    "bench_song2019.py": ["--duration", "20"],
 }
 
 

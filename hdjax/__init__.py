@@ -13,12 +13,14 @@ Sub-packages (imported on first access, so `import hdjax` stays light):
 - `hdjax.network`: the Kalman-filtered current and the back-propagation network.
 - `hdjax.fit`: joint gradient fitting of compliance, network and plant.
 - `hdjax.discover`: the residual loop (find, trace, add, refit, report).
+- `hdjax.effects`: the catalogue of physical effects, one module per family (plant effect,
+  regression term, candidates).
 - `hdjax.strain`: Hashimoto et al. (1993) strain-gauge sensing and joint torque control.
 - `hdjax.reference`: joint-torque references from a force/torque sensor and the arm's Jacobian.
 - `hdjax.report`: metrics, figures and reports.
 """
 
-from ._signals import guard_startup as _guard_startup
+from ._interrupts import guard_startup as _guard_startup
 
 _guard_startup()  # the `hdjax` command: a signal while JAX is imported exits at once (130/143)
 
@@ -40,8 +42,10 @@ from ._errors import (  # noqa: E402
     UnitWarning as UnitWarning,
 )
 from ._features import (  # noqa: E402
+    Signals as Signals,
     find_gaps as find_gaps,
     finite_difference_velocity as finite_difference_velocity,
+    signals as signals,
     smoothed_velocity as smoothed_velocity,
     twist as twist,
 )
@@ -56,6 +60,7 @@ from ._io import (  # noqa: E402
 from ._joint import Joint as Joint, load_joint as load_joint  # noqa: E402
 from ._metrics import ErrorMetrics as ErrorMetrics, error_metrics as error_metrics  # noqa: E402
 from ._recording import Recording as Recording, make_recording as make_recording  # noqa: E402
+from ._solution import RESULTS as RESULTS, Solution as Solution  # noqa: E402
 
 try:
     __version__ = importlib.metadata.version("hdjax")
@@ -68,6 +73,7 @@ _SUBPACKAGES = (
     "network",
     "fit",
     "discover",
+    "effects",
     "strain",
     "reference",
     "report",

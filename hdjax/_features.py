@@ -1,4 +1,10 @@
-"""Derived signals: twist (Song et al. eq. (5)) and velocities (eqs. (13)-(14))."""
+"""Derived signals: twist (Song et al. eq. (5)), velocities (eqs. (13)-(14)) and time gaps.
+
+[`hdjax.signals`][] is the one place a recording and a [`hdjax.Joint`][] become the per-sample
+signals every model reads ([`hdjax.Signals`][]): the twist with the joint's sign, the motor and
+load velocities, the extras and the time stamps (for the gaps). The compliance model, the
+network's features, the hybrid and joint fits and the residual loop all start from it.
+"""
 
 from __future__ import annotations
 
@@ -8,6 +14,11 @@ import numpy as np
 
 from ._custom_types import Array, Float
 from ._errors import DataError
+from ._joint import Joint
+from ._recording import Recording
+
+VELOCITY_METHODS = ("difference", "smoothed")
+_CORE = ("twist", "current", "theta_m", "theta_l", "omega_m", "omega_l")
 
 
 @eqx.filter_jit
@@ -88,8 +99,118 @@ def smoothed_velocity(t, theta, half_window: int = 5) -> Float[Array, " n"]:
 
 
 def find_gaps(t, factor: float = 3.0) -> np.ndarray:
-    """Indices `k` where `t[k+1] - t[k]` exceeds `factor` times the median step (sample gaps)."""
+    """Indices `k` where `t[k+1] - t[k]` exceeds `factor` times the median step (sample gaps),
+    or does not advance (where stacked recordings meet)."""
     dt = np.diff(np.asarray(t, np.float64))
     if dt.size == 0:
         return np.zeros(0, dtype=int)
-    return np.flatnonzero(dt > factor * np.median(dt))
+    return np.flatnonzero((dt > factor * np.median(dt)) | (dt <= 0))
+
+
+class Signals(eqx.Module):
+    """Model inputs derived from a recording (Song et al. eqs. (5), (11)-(14)).
+
+    `theta_m` is the wave-generator input angle $\\theta_{wgi}$, `theta_l` the flexspline output
+    angle $\\theta_{fso}$, `omega_*` their velocities and `twist` the total torsional angle
+    $\\Delta\\theta$ of eq. (5) (with the joint's `twist_sign`); `extras` the recording's extra
+    columns; `t` the time stamps (`None` for signals built by hand), from which [`gaps`][]
+    finds the gaps in time. Build them with [`hdjax.signals`][].
+    """
+
+    twist: Float[Array, " n"]
+    current: Float[Array, " n"]
+    theta_m: Float[Array, " n"]
+    theta_l: Float[Array, " n"]
+    omega_m: Float[Array, " n"]
+    omega_l: Float[Array, " n"]
+    extras: dict[str, Float[Array, " n"]]
+    t: Float[Array, " n"] | None = None
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.twist.shape[0])
+
+    def get(self, name: str) -> Float[Array, " n"]:
+        """A signal by name (`current`, `theta_m`, `omega_l`, ... or an extra column)."""
+        if name in _CORE:
+            return getattr(self, name)
+        if name in self.extras:
+            return self.extras[name]
+        raise DataError(
+            f"no signal {name!r}; available: {', '.join(_CORE)}"
+            + "".join(f", {k}" for k in sorted(self.extras))
+        )
+
+    def gaps(self, factor: float = 3.0) -> np.ndarray:
+        """Indices `k` after which the time stamps jump (see [`hdjax.find_gaps`][])."""
+        if self.t is None:
+            raise DataError("these signals carry no time stamps; build them with hdjax.signals")
+        return find_gaps(self.t, factor)
+
+    @classmethod
+    def concatenate(cls, parts) -> Signals:
+        """Several signals one after the other (velocities stay per part; the time stamps
+        restart, which [`gaps`][] reports)."""
+        parts = list(parts)
+        if len(parts) == 1:
+            return parts[0]
+        cat = lambda name: jnp.concatenate([getattr(s, name) for s in parts])
+        keys = set(parts[0].extras)
+        if any(set(s.extras) != keys for s in parts):
+            raise DataError("signals to concatenate must have the same extra columns")
+        times = [s.t for s in parts]
+        return cls(
+            **{name: cat(name) for name in _CORE},
+            extras={k: jnp.concatenate([s.extras[k] for s in parts]) for k in parts[0].extras},
+            t=None if any(t is None for t in times) else jnp.concatenate(times),
+        )
+
+
+def derive_signals(
+    recording: Recording,
+    ratio: float,
+    twist_sign: float,
+    *,
+    velocity: str = "difference",
+    half_window: int = 5,
+) -> Signals:
+    """[`hdjax.signals`][] with the joint given by its ratio and twist sign (both required)."""
+    if velocity not in VELOCITY_METHODS:
+        raise DataError(f"velocity must be one of {VELOCITY_METHODS}, got {velocity!r}")
+    diff = (
+        finite_difference_velocity
+        if velocity == "difference"
+        else (lambda t, x: smoothed_velocity(t, x, half_window))
+    )
+    return Signals(
+        twist=twist(recording.theta_m, recording.theta_l, ratio, twist_sign),
+        current=jnp.asarray(recording.current, jnp.float64),
+        theta_m=jnp.asarray(recording.theta_m, jnp.float64),
+        theta_l=jnp.asarray(recording.theta_l, jnp.float64),
+        omega_m=diff(recording.t, recording.theta_m),
+        omega_l=diff(recording.t, recording.theta_l),
+        extras={k: jnp.asarray(v, jnp.float64) for k, v in recording.extras.items()},
+        t=jnp.asarray(recording.t, jnp.float64),
+    )
+
+
+def signals(
+    recording: Recording, joint: Joint, *, velocity: str = "difference", half_window: int = 5
+) -> Signals:
+    """The signals every model reads, from a recording and its joint (Song et al. eqs. (5),
+    (11)-(14)).
+
+    **Arguments:**
+
+    - `recording`: the [`hdjax.Recording`][].
+    - `joint`: the [`hdjax.Joint`][]: its ratio and twist sign give the twist of eq. (5).
+    - `velocity`: `"difference"`, the paper's backward difference (eqs. (13)-(14)), or
+      `"smoothed"`, a local least-squares line over `2*half_window+1` samples.
+
+    **Returns:** [`hdjax.Signals`][] (twist with the joint's sign, velocities, extras, time).
+    """
+    if not isinstance(joint, Joint):
+        raise DataError(f"signals() needs an hdjax.Joint, got {type(joint).__name__}")
+    return derive_signals(
+        recording, joint.ratio, joint.twist_sign, velocity=velocity, half_window=half_window
+    )

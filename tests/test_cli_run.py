@@ -194,7 +194,7 @@ def new_csv(tmp_path_factory):
 
 
 def test_estimate_applies_the_saved_model(run_dir, new_csv, tmp_path):
-    from hdjax.network import estimate_torque as network_estimate
+    from hdjax.network import predict_torque as network_estimate
 
     _, out = run_dir
     rec, data = new_csv

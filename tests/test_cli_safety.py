@@ -110,3 +110,33 @@ def test_failed_sweep_leaves_no_partial_folder(proj, capsys):
     assert sorted(os.listdir(proj.parent)) == ["proj"]
     assert main(argv + ["--values", ""]) == 2
     assert "no values" in capsys.readouterr().err
+
+
+def test_a_full_disk_is_one_line_and_leaves_no_staging(proj, capsys, monkeypatch):
+    import errno
+
+    from hdjax import _io
+
+    real = _io.atomic_write_bytes
+
+    def full(path, data):
+        if str(path).endswith("metrics.json"):
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return real(path, data)
+
+    monkeypatch.setattr(_io, "atomic_write_bytes", full)
+    assert main(["run", "proj/cfg.toml", "--out", "res", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no space left on device; the disk is full" in err, err
+    assert sorted(os.listdir(proj.parent)) == ["proj"]
+
+
+def test_a_folder_without_write_permission_is_refused_before_work(proj, capsys, monkeypatch):
+    # (root may write anywhere, so the permission answer is simulated where it is asked)
+    from hdjax.report import _outputs
+
+    monkeypatch.setattr(_outputs.os, "access", lambda p, mode: False)
+    assert main(["run", "proj/cfg.toml", "--out", "res", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("hdjax: error: res: cannot write in ") and "permission" in err
+    assert sorted(os.listdir(proj.parent)) == ["proj"]

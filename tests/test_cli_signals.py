@@ -174,3 +174,6 @@ def test_a_swallowed_interrupt_still_ends_the_command(tmp_path, monkeypatch, cap
     assert capsys.readouterr().err.strip() == "hdjax: interrupted (SIGINT)"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cfg.toml"]
     assert signal.getsignal(signal.SIGINT) is before  # the handlers are restored
+    from hdjax._interrupts import pending
+
+    assert pending() is None  # and the next command in this process starts clean

@@ -154,7 +154,11 @@ def test_single_sample_matches_batch(segment_model):
     sig, torque = _forward(segment_model, np.linspace(-80, 80, 9), seed=2)
     batch = estimate_torque(segment_model, sig)
     for i in range(9):
-        x = [float(getattr(sig, k)[i]) for k in Signals.__dataclass_fields__ if k != "extras"]
+        x = [
+            float(getattr(sig, k)[i])
+            for k in Signals.__dataclass_fields__
+            if k not in ("extras", "t")
+        ]
         one = estimate_torque_single(segment_model, *x)
         assert one.torque == pytest.approx(float(batch.torque[i]), abs=1e-12)
         assert one.segment == int(batch.segment[i]) and one.in_range == bool(batch.in_range[i])

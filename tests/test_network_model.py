@@ -133,7 +133,7 @@ def test_optax_reaches_validation_target(trained, data):
     assert opt.stopped == "target"
     assert float(opt.val_rmse[-1]) <= 2.0
     # Independent check of the reported validation error from the recording.
-    est = np.asarray(hn.estimate_torque(opt.network, rec, JOINT))
+    est = np.asarray(hn.predict_torque(opt.network, rec, JOINT))
     val = np.arange(est.size) % 3 == 2
     err = est[val] - np.asarray(rec.torque)[val]
     assert np.sqrt(np.mean(err**2)) == pytest.approx(float(opt.val_rmse[-1]), rel=1e-9)

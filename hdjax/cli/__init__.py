@@ -14,8 +14,7 @@ import os
 import sys
 import warnings
 
-from .._errors import HdjaxError
-from .._io import did_you_mean
+from .._errors import HdjaxError, did_you_mean
 from ._common import Parser, ParserExit, UsageError
 
 COMMANDS = ("run", "sweep", "estimate", "discover", "bench", "convert", "fleet")
@@ -142,7 +141,7 @@ def main(argv=None) -> int:
     `hdjax: error: <file>: <what went wrong>; <what to do>`), 130 after SIGINT (Ctrl-C) and
     143 after SIGTERM, with no partial result left behind.
     """
-    from .._signals import Interrupted, handling, pending
+    from .._interrupts import Interrupted, handling, pending
 
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
 

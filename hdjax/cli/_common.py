@@ -6,8 +6,7 @@ import argparse
 import sys
 import time
 
-from .._errors import ConfigError
-from .._io import did_you_mean
+from .._errors import ConfigError, did_you_mean
 
 
 class UsageError(Exception):
@@ -65,7 +64,7 @@ class Progress:
         self.t0 = time.perf_counter()
 
     def __call__(self, message: str) -> None:
-        from .._signals import check
+        from .._interrupts import check
 
         check()  # a signal whose exception was swallowed ends the command here
         if self.quiet:
@@ -98,6 +97,12 @@ def add_common(p: argparse.ArgumentParser) -> None:
         action="append",
         help="change one setting of the config, e.g. --set model.poly_order=4 (repeatable; "
         'values are TOML: 4, 1.5, true, [20, 20], "text")',
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="run even when a recording's motor/output angle ratio differs from the joint's "
+        "(refused by default: the calibration would be wrong)",
     )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress lines on stderr")
 

@@ -100,17 +100,18 @@ def command(args, parser) -> int:
                 f"{w.message}; the estimate would be wrong, so none is written (pass "
                 "--force to estimate anyway)"
             )
-    check_compatible(saved, rec, joint, check_angles=not args.force)
-    if args.force:
-        why = angle_ratio_mismatch(saved, rec)
-        if why:
-            progress.warn(f"{why} (--force: estimating anyway; the torques may be wrong)")
+    check_compatible(saved, rec, joint, check_angles=False)
+    why = angle_ratio_mismatch(saved, rec)
+    if why and not args.force:
+        raise ModelMismatchError(f"{why}; pass --force to estimate anyway")
+    if why:
+        progress.warn(f"{why} (--force: estimating anyway; the torques may be wrong)")
     progress(f"estimating {rec.n_samples} samples with the {args.method} of {model_path}")
     cols = {"t": np.asarray(rec.t)}
     if args.method == "network":
         if saved.network is None:
             raise ModelMismatchError(f"{model_path}: holds no network; use --method model")
-        from ..network import estimate_torque as net_estimate
+        from ..network import predict_torque as net_estimate
 
         cols["torque_estimate"] = np.asarray(net_estimate(saved.network, rec, saved.joint))
     else:

@@ -53,7 +53,7 @@ def command(args, parser) -> int:
     out = Path(args.out) if args.out else Path("runs") / exp["experiment"]["name"]
     inputs = experiment_inputs(exp)
     with ResultDir(out, overwrite=args.overwrite, inputs=inputs, command="run") as rd:
-        summary = run_experiment(exp, rd, progress)
+        summary = run_experiment(exp, rd, progress, force=args.force)
     progress(f"wrote {out}")
     print(summary)
     return 0
@@ -62,17 +62,19 @@ def command(args, parser) -> int:
 # ---------------------------------------------------------------------------------------------
 
 
-def run_experiment(exp, rd, progress) -> str:
+def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
     """Carry out an experiment into a [`hdjax.report.ResultDir`][]; returns a text summary."""
     import numpy as np
 
     from ..config import _pipeline as P, build_dataset, dumps_toml, save_model
+    from ..config._preflight import check_angles
     from ..report import environment
 
     t_start = time.perf_counter()
     cfg = exp
     seed = cfg["experiment"]["seed"]
     ds = build_dataset(exp, progress)
+    check_angles(ds, force=force, warn=progress.warn)
     joint = ds.joint
     rated = joint.rated_torque
     outputs = cfg["outputs"]
@@ -137,7 +139,7 @@ def run_experiment(exp, rd, progress) -> str:
             "scenarios": P.metrics_of(est_n, ds.test, rated),
         }
         if outputs["timing"]:
-            from ..network import estimate_torque as net_estimate
+            from ..network import predict_torque as net_estimate
 
             metrics["network"]["timing"] = P.time_per_100(
                 lambda r: net_estimate(net, r, joint), first_test, outputs["timing_repeats"]

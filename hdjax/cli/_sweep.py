@@ -87,7 +87,9 @@ def command(args, parser) -> int:
     values = parse_values(args.values) if args.values is not None else list(exp["sweep"]["values"])
     name = exp["experiment"]["name"]
     out = Path(args.out) if args.out else Path("runs") / f"{name}-sweep-{setting.replace('.', '-')}"
-    summary = run_sweep(exp, setting, values, out, args.overwrite, progress, fresh=args.fresh)
+    summary = run_sweep(
+        exp, setting, values, out, args.overwrite, progress, fresh=args.fresh, force=args.force
+    )
     print(summary)
     return 0
 
@@ -107,7 +109,15 @@ def _member_file(i: int, value) -> str:
 
 
 def run_sweep(
-    exp, setting: str, values: list, out: Path, overwrite: bool, progress, *, fresh=False
+    exp,
+    setting: str,
+    values: list,
+    out: Path,
+    overwrite: bool,
+    progress,
+    *,
+    fresh=False,
+    force=False,
 ):
     """Run a sweep into `out` (atomically, resumable); returns a text summary."""
     from .._errors import ConfigError
@@ -134,7 +144,7 @@ def run_sweep(
         command="sweep",
     )
     try:
-        summary_rows = _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh)
+        summary_rows = _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force)
     except BaseException:
         rd.abort()  # keeps finished members for resuming; an empty staging folder goes
         raise
@@ -142,10 +152,11 @@ def run_sweep(
     return summary_rows
 
 
-def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh):
+def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force):
     import numpy as np
 
     from ..config import build_dataset, dumps_toml
+    from ..config._preflight import check_angles
     from ..report import environment, find_knee, markdown_table, sweep_figure
 
     fp = _fingerprint(dict(exp), setting)
@@ -171,10 +182,12 @@ def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh):
             for i in todo:
                 progress(f"member {i + 1}/{len(values)}: {setting} = {values[i]!r}")
                 ds = build_dataset(_with_path(cfgs[i], exp), progress)
+                check_angles(ds, force=force, warn=progress.warn)
                 results[i] = _member_loop(cfgs[i], ds, method, exp["experiment"]["seed"])
                 _save_member(rd, i, values[i], fp, results[i])
         else:
             ds = build_dataset(exp, progress)
+            check_angles(ds, force=force, warn=progress.warn)
             nested = (
                 setting in NESTED
                 and all(
@@ -335,8 +348,8 @@ def _members_nested(exp, setting, values, todo, cfgs, ds, progress):
     """Polynomial / Fourier orders: one Gram pass, per-member solves, one batched estimate."""
     import numpy as np
 
+    from ..compliance._nested import batched_estimates, nested_fit
     from ..config import _pipeline as P
-    from ._sweep_fit import batched_estimates, nested_fit
 
     scale = P.current_scale(exp, ds.train)
     vmax = max(values[i] for i in todo)

@@ -40,10 +40,11 @@ import numpy as np
 
 from .._custom_types import Array, Bool, Float, Int
 from .._errors import InversionError
+from .._features import signals
 from .._recording import Recording
 from ._lstsq import check_invertible
 from ._model import ComplianceModel
-from ._signals import Signals, signals_from_recording
+from ._signals import Signals
 
 EDGE_TOLERANCE = 1e-9
 """A candidate counts as inside its segment up to this fraction of the rated torque."""
@@ -86,9 +87,11 @@ def _base_h(model: ComplianceModel, sig: Signals) -> list:
     return out
 
 
-def _calibrated_segments(model: ComplianceModel) -> np.ndarray:
+def calibrated_segments(model: ComplianceModel, active=None) -> np.ndarray:
+    """Which segments a model with these active flags (default its own) can invert in: the
+    segment's compliance and, per segment, at least one of its base terms are calibrated."""
     n_seg, nb = model.n_segments, model.n_base
-    act = np.asarray(model.active)
+    act = np.asarray(model.active if active is None else active)
     ok = act[:n_seg].copy()
     if model.per_segment and nb:
         for s in range(n_seg):
@@ -103,7 +106,7 @@ def _piecewise(model: ComplianceModel, r, hs: list, g):
     segment the candidate $T_s$, its signed distance outside the segment and its depth inside.
     """
     k = model.k
-    ok = _calibrated_segments(model)
+    ok = calibrated_segments(model)
     bounds = model.segment_bounds
     default_width = 2.0 * model.rated_torque / model.n_segments
     tol = EDGE_TOLERANCE * model.rated_torque
@@ -240,7 +243,7 @@ def estimate_torque(model: ComplianceModel, data) -> TorqueEstimate:
     """
     _check_estimable(model)
     if isinstance(data, Recording):
-        data = signals_from_recording(data, model.ratio, model.twist_sign, velocity=model.velocity)
+        data = signals(data, model.joint, velocity=model.velocity)
     missing = [
         name
         for term in model.base_terms + model.effect_terms
@@ -282,7 +285,7 @@ def _check_estimable(model: ComplianceModel) -> None:
     msg = check_invertible(model)
     if msg:
         raise InversionError(msg)
-    if not _calibrated_segments(model).any():
+    if not calibrated_segments(model).any():
         raise InversionError("the model has no calibrated segment; calibrate it first")
 
 

@@ -29,9 +29,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import CalibrationError, DataError, InversionError
+from .._features import signals
 from .._recording import Recording
 from ._model import ComplianceModel
-from ._signals import Signals, signals_from_recording
+from ._signals import Signals
 
 RANK_RTOL = 1e-10
 """Singular values of the scaled design below `RANK_RTOL * max` count as zero."""
@@ -71,7 +72,7 @@ def prepare(model: ComplianceModel, data) -> tuple[Signals, jax.Array]:
                 f"{data.source}: calibration needs a reference 'torque' column (a torque sensor "
                 "or another reference); the recording has none"
             )
-        sig = signals_from_recording(data, model.ratio, model.twist_sign, velocity=model.velocity)
+        sig = signals(data, model.joint, velocity=model.velocity)
         return sig, data.torque
     if isinstance(data, tuple) and len(data) == 2 and isinstance(data[0], Signals):
         return data[0], jnp.asarray(data[1], jnp.float64)

@@ -62,7 +62,8 @@ class ComplianceModel(eqx.Module):
     **Fields:**
 
     - `coef`: all coefficients (float64), in the order of `term_names`.
-    - `ratio`, `rated_torque`, `twist_sign`: the joint (see [`hdjax.Joint`][]).
+    - `joint`: the [`hdjax.Joint`][] (ratio, rated torque, twist sign); `ratio`, `rated_torque`
+      and `twist_sign` read it.
     - `knots`: inner segment boundaries [N·m], increasing, with 0 strictly inside the central
       segment. The outer segments extend without bound (extrapolation is flagged).
     - `torque_range`: the torque range the model is valid for (calibrated range).
@@ -74,9 +75,7 @@ class ComplianceModel(eqx.Module):
     """
 
     coef: Float[Array, " p"]
-    ratio: float = eqx.field(static=True)
-    rated_torque: float = eqx.field(static=True)
-    twist_sign: float = eqx.field(static=True)
+    joint: Joint = eqx.field(static=True)
     knots: tuple[float, ...] = eqx.field(static=True)
     torque_range: tuple[float, float] = eqx.field(static=True)
     base_terms: tuple = eqx.field(static=True)
@@ -86,10 +85,8 @@ class ComplianceModel(eqx.Module):
     velocity: str = eqx.field(static=True, default="difference")
 
     def __check_init__(self):
-        if self.ratio <= 0:
-            raise ConfigError(f"ratio must be positive, got {self.ratio}")
-        if self.rated_torque <= 0:
-            raise ConfigError(f"rated_torque must be positive, got {self.rated_torque}")
+        if not isinstance(self.joint, Joint):
+            raise ConfigError(f"joint must be an hdjax.Joint, got {type(self.joint).__name__}")
         k = self.knots
         if any(b <= a for a, b in zip(k, k[1:])):
             raise ConfigError(f"knots must be strictly increasing, got {k}")
@@ -164,9 +161,7 @@ class ComplianceModel(eqx.Module):
         if torque_range is None:
             torque_range = (-joint.rated_torque, joint.rated_torque)
         return cls.build(
-            ratio=joint.ratio,
-            rated_torque=joint.rated_torque,
-            twist_sign=joint.twist_sign,
+            joint=joint,
             knots=knots,
             base_terms=tuple(base),
             effect_terms=(),
@@ -195,9 +190,7 @@ class ComplianceModel(eqx.Module):
         """The same joint and base terms with other knots and/or effect groups (coefficients
         reset to zero, every term active)."""
         return ComplianceModel.build(
-            ratio=self.ratio,
-            rated_torque=self.rated_torque,
-            twist_sign=self.twist_sign,
+            joint=self.joint,
             knots=self.knots if knots is None else tuple(knots),
             torque_range=self.torque_range,
             velocity=self.velocity,
@@ -211,6 +204,21 @@ class ComplianceModel(eqx.Module):
         return self.restructured(effect_terms=self.effect_terms + tuple(terms))
 
     # -- structure ---------------------------------------------------------------------------
+
+    @property
+    def ratio(self) -> float:
+        """Reduction ratio $N$ of the joint."""
+        return self.joint.ratio
+
+    @property
+    def rated_torque(self) -> float:
+        """Rated torque $\\tau_0$ [N·m] of the joint."""
+        return self.joint.rated_torque
+
+    @property
+    def twist_sign(self) -> float:
+        """Twist sign of the joint (see [`hdjax.Joint`][])."""
+        return self.joint.twist_sign
 
     @property
     def n_segments(self) -> int:
@@ -345,6 +353,7 @@ class ComplianceModel(eqx.Module):
             "ratio": self.ratio,
             "rated_torque": self.rated_torque,
             "twist_sign": self.twist_sign,
+            "joint": self.joint.to_dict(),
             "knots": list(self.knots),
             "torque_range": list(self.torque_range),
             "base_terms": [term_to_dict(t) for t in self.base_terms],
@@ -361,9 +370,15 @@ class ComplianceModel(eqx.Module):
         """Inverse of `to_dict`."""
         return cls(
             coef=jnp.asarray(d["coef"], jnp.float64),
-            ratio=float(d["ratio"]),
-            rated_torque=float(d["rated_torque"]),
-            twist_sign=float(d["twist_sign"]),
+            joint=(
+                Joint.from_dict(d["joint"])
+                if "joint" in d
+                else Joint(
+                    ratio=float(d["ratio"]),
+                    rated_torque=float(d["rated_torque"]),
+                    twist_sign=float(d["twist_sign"]),
+                )
+            ),
             knots=tuple(float(k) for k in d["knots"]),
             torque_range=tuple(float(x) for x in d["torque_range"]),
             base_terms=tuple(term_from_dict(t) for t in d["base_terms"]),

@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import ConfigError
+from .._features import Signals, signals
 from .._joint import Joint
 from .._metrics import error_metrics
 from .._recording import Recording
@@ -82,27 +83,9 @@ def build_model(cfg: dict, joint: Joint, scale: float):
 
 def stacked_signals(model, recordings: list[Recording]):
     """Signals and reference torque of several recordings, stacked (velocities per recording)."""
-    from ..compliance import Signals, signals_from_recording
-
-    sigs = [
-        signals_from_recording(r, model.ratio, model.twist_sign, velocity=model.velocity)
-        for r in recordings
-    ]
+    sigs = [signals(r, model.joint, velocity=model.velocity) for r in recordings]
     torque = jnp.concatenate([jnp.asarray(r.column("torque")) for r in recordings])
-    if len(sigs) == 1:
-        return sigs[0], torque
-    cat = lambda name: jnp.concatenate([getattr(s, name) for s in sigs])
-    extras = {k: jnp.concatenate([s.extras[k] for s in sigs]) for k in sigs[0].extras}
-    sig = Signals(
-        twist=cat("twist"),
-        current=cat("current"),
-        theta_m=cat("theta_m"),
-        theta_l=cat("theta_l"),
-        omega_m=cat("omega_m"),
-        omega_l=cat("omega_l"),
-        extras=extras,
-    )
-    return sig, torque
+    return Signals.concatenate(sigs), torque
 
 
 def calibrate(cfg: dict, model, train: list[Recording], warn=None):
@@ -164,7 +147,7 @@ def network_available() -> str:
     try:
         from .. import network  # noqa: F401
 
-        for name in ("Network", "build_features", "train_optax", "estimate_torque"):
+        for name in ("Network", "build_features", "train_optax", "predict_torque"):
             getattr(network, name)
     except (ImportError, AttributeError) as err:
         return f"hdjax.network is not available ({err})"
@@ -240,7 +223,7 @@ def estimate_network(net, joint: Joint, recordings: dict[str, Recording]) -> dic
     """Torque estimates of a trained network on each recording (name -> array)."""
     from .. import network as nw
 
-    return {name: nw.estimate_torque(net, rec, joint) for name, rec in recordings.items()}
+    return {name: nw.predict_torque(net, rec, joint) for name, rec in recordings.items()}
 
 
 # ---------------------------------------------------------------------------------------------

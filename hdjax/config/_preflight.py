@@ -134,3 +134,23 @@ def preflight(cfg: dict, *, base_dir=None, where: str = "config") -> None:
     need = read_bytes + design
     if math.isfinite(need):
         check_memory(need, f"{where}: {what} with {n_coef} model terms", fix)
+
+
+def check_angles(ds, *, force: bool = False, warn=None) -> None:
+    """Refuse recordings whose motor-to-output angle ratio differs from the joint's by more
+    than 5 % (another joint's data, or angles scaled differently): a model calibrated on them
+    would be wrong. With `force` each mismatch goes to `warn` instead.
+
+    **Raises:** [`hdjax.ModelMismatchError`][] naming the recording, unless `force`.
+    """
+    from .._errors import ModelMismatchError
+    from ._saved_model import ratio_mismatch
+
+    for rec in list(ds.train) + list(ds.test.values()):
+        why = ratio_mismatch(ds.joint.ratio, rec)
+        if not why:
+            continue
+        if not force:
+            raise ModelMismatchError(f"{why}; pass --force to run anyway")
+        if warn is not None:
+            warn(f"{why} (--force: running anyway; the results may be wrong)")

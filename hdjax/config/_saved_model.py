@@ -204,21 +204,26 @@ def load_model(path) -> SavedModel:
     )
 
 
-def angle_ratio_mismatch(saved: SavedModel, recording: Recording) -> str:
-    """Why the recording's angles do not match the model's ratio (`""` when they do, or when
-    the output moves too little to tell)."""
-    ratio = saved.joint.ratio
+def ratio_mismatch(ratio: float, recording: Recording, *, whose: str = "the joint's") -> str:
+    """Why the recording's angles do not match the gear `ratio` (`""` when they do, or when the
+    output moves too little to tell): the slope of $\theta_m$ against $\theta_l$ must be
+    within 5 % of the ratio (Song et al. eq. (5) with a small twist)."""
     theta_l = np.asarray(recording.theta_l)
     theta_m = np.asarray(recording.theta_m)
-    if np.ptp(theta_l) > 0.5:
+    if np.ptp(theta_l) > 0.5 and np.all(np.isfinite(theta_l)) and np.all(np.isfinite(theta_m)):
         slope = np.polyfit(theta_l, theta_m, 1)[0]
         if not np.isclose(abs(slope), ratio, rtol=0.05):
             return (
                 f"{recording.source}: the motor angle moves {abs(slope):.4g} times the output "
-                f"angle but the model was calibrated for ratio {ratio:g}; this data comes from "
-                "another joint (or the angle columns are scaled differently)"
+                f"angle but {whose} ratio is {ratio:g}; this data comes from another joint (or "
+                "the angle columns are scaled differently)"
             )
     return ""
+
+
+def angle_ratio_mismatch(saved: SavedModel, recording: Recording) -> str:
+    """Why the recording's angles do not match the model's ratio (`""` when they do)."""
+    return ratio_mismatch(saved.joint.ratio, recording, whose="the model's")
 
 
 def check_compatible(

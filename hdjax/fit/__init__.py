@@ -1,10 +1,17 @@
 """Joint gradient fitting of compliance model, network and plant parameters."""
 
 from ._compare import (
+    FITTERS as FITTERS,
     METHOD_NAMES as METHOD_NAMES,
     compare_methods as compare_methods,
     format_table as format_table,
     plot_comparison as plot_comparison,
+)
+from ._estimators import (
+    AbstractEstimator as AbstractEstimator,
+    ComplianceEstimator as ComplianceEstimator,
+    HybridEstimator as HybridEstimator,
+    NetworkEstimator as NetworkEstimator,
 )
 from ._hybrid import (
     PLANT_FIELDS as PLANT_FIELDS,

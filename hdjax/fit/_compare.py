@@ -11,6 +11,7 @@ torques (features included), the minimum over repeats.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import timeit
 import warnings
@@ -19,9 +20,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import compliance as hc, network as hn, plant
+from .._features import signals
 from .._joint import Joint
 from .._metrics import error_metrics
-from ._inputs import DAHL_FRACTIONS
+from .._plotting import pyplot
+from .._solution import RESULTS, Solution
+from ._estimators import ComplianceEstimator, HybridEstimator, NetworkEstimator
+from ._hybrid import fit_hybrid, make_hybrid
+from ._inputs import DAHL_FRACTIONS, dahl_scales, hybrid_inputs
+from ._linear import fit_compliance_gradient
 
 METHOD_NAMES = (
     "lstsq",
@@ -63,6 +71,108 @@ def _join(recs):
     )
 
 
+@dataclasses.dataclass
+class _FitContext:
+    """What every method's fitter reads (the training data and the structures), and the hybrid
+    rows' shared closed-form start, computed once."""
+
+    joint: Joint
+    params: object
+    structure: object
+    hybrid_structure: object
+    sig_train: object
+    tq_train: object
+    train: list
+    train_all: object
+    dynamic: bool
+    hidden: tuple[int, ...]
+    steps: int
+    _hybrid_ls: tuple | None = None
+
+    def hybrid_start(self):
+        """(the hybrid rows' least-squares compliance part, its fit time); fitted once and
+        charged to every row that uses it."""
+        if self._hybrid_ls is None:
+            t0 = time.perf_counter()
+            m = hc.calibrate_lstsq(self.hybrid_structure, (self.sig_train, self.tq_train)).model
+            self._hybrid_ls = (m, time.perf_counter() - t0)
+        return self._hybrid_ls
+
+
+def _fit_lstsq(c: _FitContext):
+    t0 = time.perf_counter()
+    model = hc.calibrate_lstsq(c.structure, (c.sig_train, c.tq_train)).model
+    return ComplianceEstimator(model), time.perf_counter() - t0
+
+
+def _fit_rls(c: _FitContext):
+    # Rows interleaved (fixed permutation) so the initial block of eq. (18) sees all four
+    # experiments; without forgetting the order does not change the solution.
+    t0 = time.perf_counter()
+    perm = np.random.default_rng(0).permutation(c.tq_train.shape[0])
+    shuffled = (jax.tree.map(lambda a: a[perm], c.sig_train), c.tq_train[perm])
+    model = hc.calibrate_rls(c.structure, shuffled, init_samples=2000).model
+    return ComplianceEstimator(model), time.perf_counter() - t0
+
+
+def _fit_gradient(method: str):
+    def fit(c: _FitContext):
+        res = fit_compliance_gradient(c.structure, c.train_all, method=method, steps=4000)
+        return ComplianceEstimator(res.model), res.fit_time_s  # its own timing, compile included
+
+    return fit
+
+
+def _fit_paper_network(c: _FitContext):
+    t0 = time.perf_counter()
+    feats = hn.build_features(c.train_all, c.joint, kalman=True)
+    net = hn.Network(feats.layout, (20,), key=jax.random.key(10))
+    res = hn.train_backprop(
+        net,
+        feats.x,
+        c.train_all.torque,
+        mu=0.02,
+        eta=0.02,
+        error_target=1e-5,
+        max_learnings=1_000_000,
+        check_every=50_000,
+        key=jax.random.key(11),
+    )
+    return NetworkEstimator(res.network, c.joint), time.perf_counter() - t0
+
+
+def _fit_hybrid(with_plant: bool):
+    def fit(c: _FitContext):
+        hybrid_ls, hybrid_ls_s = c.hybrid_start()
+        t0 = time.perf_counter()
+        options = dict(twist_rate=True, hysteresis=dahl_scales(hybrid_ls)) if c.dynamic else {}
+        pl = c.params if with_plant else None
+        inp = _concat([hybrid_inputs(r, c.joint, compliance=hybrid_ls, **options) for r in c.train])
+        model = make_hybrid(
+            inp, compliance=hybrid_ls, hidden=c.hidden, plant=pl, key=jax.random.key(20)
+        )
+        res = fit_hybrid(
+            model, inp, steps=c.steps, learning_rate=1e-2, batch_size=1024, key=jax.random.key(21)
+        )
+        est = HybridEstimator(res.model, hybrid_ls, c.joint, tuple(options.items()))
+        return est, time.perf_counter() - t0 + hybrid_ls_s  # the closed-form start counts too
+
+    return fit
+
+
+FITTERS: dict = {
+    "lstsq": _fit_lstsq,
+    "rls": _fit_rls,
+    "adam": _fit_gradient("adam"),
+    "levenberg_marquardt": _fit_gradient("levenberg_marquardt"),
+    "paper_network": _fit_paper_network,
+    "hybrid": _fit_hybrid(with_plant=False),
+    "joint_plant": _fit_hybrid(with_plant=True),
+}
+"""Method name -> fitter `(context) -> (estimator, fit seconds)`: each returns an
+[`hdjax.fit.AbstractEstimator`][]; the comparison is a loop over them."""
+
+
 def _time_per_sample(fn, n: int, repeat: int = 3) -> float:
     jax.block_until_ready(fn())
     return min(timeit.repeat(lambda: jax.block_until_ready(fn()), number=1, repeat=repeat)) / n
@@ -100,11 +210,6 @@ def compare_methods(
     the method of lowest RMS and whether it meets RMS <= 1 % and max <= 5 % of rated torque),
     and `settings`.
     """
-    from .. import compliance as hc, network as hn, plant
-    from ._hybrid import fit_hybrid, make_hybrid, predict_hybrid
-    from ._inputs import dahl_scales, hybrid_inputs
-    from ._linear import fit_compliance_gradient
-
     train_key = jax.random.key(0) if train_key is None else train_key
     test_key = jax.random.key(1) if test_key is None else test_key
     scenarios = tuple(plant.SCENARIOS if scenarios is None else scenarios)
@@ -124,7 +229,7 @@ def compare_methods(
     structure = hc.ComplianceModel.paper(
         joint, per_segment=False, kinematic="harmonic", current_scale=10.0
     )
-    sig_train = _concat([hc.signals_from_recording(r, joint.ratio) for r in train])
+    sig_train = _concat([signals(r, joint) for r in train])
     tq_train = jnp.concatenate([r.torque for r in train])
     train_all = _join(train)
 
@@ -141,83 +246,33 @@ def compare_methods(
         else structure
     )
 
-    fitted: dict[str, tuple] = {}  # name -> (fit_time, estimate function of a recording)
-    hybrid_ls, hybrid_ls_s = None, 0.0  # shared by the hybrid and joint rows
-
-    def compliance_estimator(model):
-        return lambda rec: hc.estimate_torque(model, rec).torque
-
+    ctx = _FitContext(
+        joint=joint,
+        params=params,
+        structure=structure,
+        hybrid_structure=hybrid_structure,
+        sig_train=sig_train,
+        tq_train=tq_train,
+        train=train,
+        train_all=train_all,
+        dynamic=dynamic,
+        hidden=hidden,
+        steps=steps,
+    )
+    unknown = [m for m in methods if m not in FITTERS]
+    if unknown:
+        raise ValueError(f"unknown method {unknown[0]!r}; known: {', '.join(METHOD_NAMES)}")
+    fitted: dict[str, Solution] = {}  # name -> Solution(estimator, stats={"fit_time_s": ...})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for name in methods:
-            t0 = time.perf_counter()
-            if name == "lstsq":
-                m = hc.calibrate_lstsq(structure, (sig_train, tq_train)).model
-                fitted[name] = (time.perf_counter() - t0, compliance_estimator(m))
-            elif name == "rls":
-                # Rows interleaved (fixed permutation) so the initial block of eq. (18) sees all
-                # four experiments; without forgetting the order does not change the solution.
-                perm = np.random.default_rng(0).permutation(tq_train.shape[0])
-                shuffled = (jax.tree.map(lambda a: a[perm], sig_train), tq_train[perm])
-                m = hc.calibrate_rls(structure, shuffled, init_samples=2000).model
-                fitted[name] = (time.perf_counter() - t0, compliance_estimator(m))
-            elif name in ("adam", "levenberg_marquardt"):
-                res = fit_compliance_gradient(structure, train_all, method=name, steps=4000)
-                fitted[name] = (res.fit_time_s, compliance_estimator(res.model))
-            elif name == "paper_network":
-                feats = hn.build_features(train_all, joint, kalman=True)
-                net = hn.Network(feats.layout, (20,), key=jax.random.key(10))
-                res = hn.train_backprop(
-                    net,
-                    feats.x,
-                    train_all.torque,
-                    mu=0.02,
-                    eta=0.02,
-                    error_target=1e-5,
-                    max_learnings=1_000_000,
-                    check_every=50_000,
-                    key=jax.random.key(11),
-                )
-                trained = res.network
-                fitted[name] = (
-                    time.perf_counter() - t0,
-                    lambda rec, n=trained: hn.estimate_torque(n, rec, joint),
-                )
-            elif name in ("hybrid", "joint_plant"):
-                if hybrid_ls is None:
-                    hybrid_ls = hc.calibrate_lstsq(hybrid_structure, (sig_train, tq_train)).model
-                    hybrid_ls_s = time.perf_counter() - t0
-                    t0 = time.perf_counter()
-                options = (
-                    dict(twist_rate=True, hysteresis=dahl_scales(hybrid_ls)) if dynamic else {}
-                )
-                pl = params if name == "joint_plant" else None
-
-                def inputs_of(rec, comp=hybrid_ls, options=options):
-                    return hybrid_inputs(rec, joint, compliance=comp, **options)
-
-                inp = _concat([inputs_of(r) for r in train])
-                model = make_hybrid(
-                    inp, compliance=hybrid_ls, hidden=hidden, plant=pl, key=jax.random.key(20)
-                )
-                res = fit_hybrid(
-                    model,
-                    inp,
-                    steps=steps,
-                    learning_rate=1e-2,
-                    batch_size=1024,
-                    key=jax.random.key(21),
-                )
-                fitted[name] = (
-                    time.perf_counter() - t0 + hybrid_ls_s,  # the closed-form start counts too
-                    lambda rec, m=res.model, f=inputs_of: predict_hybrid(m, f(rec)),
-                )
-            else:
-                raise ValueError(f"unknown method {name!r}; known: {', '.join(METHOD_NAMES)}")
-            say(f"fitted {name} in {fitted[name][0]:.1f} s")
+            estimator, fit_s = FITTERS[name](ctx)
+            fitted[name] = Solution(estimator, RESULTS.successful, {"fit_time_s": fit_s})
+            say(f"fitted {name} in {fit_s:.1f} s")
 
     rows = []
-    for name, (fit_s, estimate) in fitted.items():
+    for name, sol in fitted.items():
+        estimate, fit_s = sol.value.estimate, sol.stats["fit_time_s"]
         for s, rec in test.items():
             est = np.asarray(estimate(rec))
             m = error_metrics(est, rec.torque, tau0)
@@ -286,10 +341,7 @@ def format_table(result: dict) -> str:
 
 def plot_comparison(result: dict, path) -> None:
     """Grouped bars of RMS and maximum error (% of rated torque) per scenario and method."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     rows = result["rows"]
     methods = list(dict.fromkeys(r["method"] for r in rows))

@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 
 from .._errors import ConfigError
-from .._features import smoothed_velocity, twist
+from .._features import signals, smoothed_velocity
 from .._joint import Joint
 from .._recording import Recording
 from ..network import FeatureLayout, build_features
@@ -112,7 +112,7 @@ def dynamic_columns(
     from ..compliance import dahl_state
 
     scales = _check_positive("hysteresis", hysteresis)
-    tw = twist(recording.theta_m, recording.theta_l, joint.ratio, joint.twist_sign)
+    tw = signals(recording, joint).twist
     cols = {}
     if twist_rate:
         cols["twist_rate"] = smoothed_velocity(recording.t, tw, TWIST_RATE_HALF_WINDOW)
@@ -148,11 +148,7 @@ def hybrid_inputs(
     """
     sig = None
     if compliance is not None:
-        from ..compliance import signals_from_recording
-
-        sig = signals_from_recording(
-            recording, compliance.ratio, compliance.twist_sign, velocity=compliance.velocity
-        )
+        sig = signals(recording, compliance.joint, velocity=compliance.velocity)
     feats = build_features(recording, joint, periodic=periodic, kalman=kalman)
     extra = dynamic_columns(recording, joint, twist_rate=twist_rate, hysteresis=hysteresis)
     x, layout = feats.x, feats.layout

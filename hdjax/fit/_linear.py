@@ -40,6 +40,7 @@ import optax
 import optimistix as optx
 
 from .._errors import CalibrationError, ConfigError, DataError
+from .._features import signals
 from .._recording import Recording
 
 METHODS = ("gauss_newton", "levenberg_marquardt", "adam")
@@ -80,12 +81,11 @@ def linear_problem(model, recording: Recording, active=None) -> LinearProblem:
     `active` (mask) defaults to the coefficients [`hdjax.compliance.calibrate_lstsq`][] would
     calibrate on this recording.
     """
-    from ..compliance import signals_from_recording
     from ..compliance._lstsq import select_active
 
     if not isinstance(recording, Recording) or recording.torque is None:
         raise DataError("gradient calibration needs a Recording with a reference torque")
-    sig = signals_from_recording(recording, model.ratio, model.twist_sign, velocity=model.velocity)
+    sig = signals(recording, model.joint, velocity=model.velocity)
     a = np.asarray(model.design(sig, recording.torque))
     if active is None:
         with warnings.catch_warnings():

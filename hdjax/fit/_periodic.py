@@ -23,8 +23,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import compliance as hc, network as hn, plant
+from .._features import signals
 from .._joint import Joint
 from .._metrics import error_metrics
+from ._compare import _concat, _join
+from ._estimators import HybridEstimator, NetworkEstimator
+from ._hybrid import fit_hybrid, make_hybrid
+from ._inputs import dahl_scales, hybrid_inputs
 
 KINEMATIC_EFFECTS = ("harmonic_m", "harmonic_l")
 """The plant effects that make up its kinematic error (switched off for the 'off' case)."""
@@ -51,11 +57,6 @@ def periodic_features_effect(
     and scenario: `rms_pct`, `max_pct` of rated torque), `summary` (the same averaged over
     seeds, with `rms_ratio` = RMS without / with periodic features) and `settings`.
     """
-    from .. import compliance as hc, network as hn, plant
-    from ._compare import _concat, _join
-    from ._hybrid import fit_hybrid, make_hybrid, predict_hybrid
-    from ._inputs import dahl_scales, hybrid_inputs
-
     params = plant.song_params()
     joint = Joint(ratio=float(params.ratio), rated_torque=float(params.rated_torque))
     tau0 = joint.rated_torque
@@ -70,7 +71,7 @@ def periodic_features_effect(
         train = [sim(s, 0) for s in plant.SCENARIOS]
         test = {s: sim(s, 1) for s in plant.SCENARIOS}
         train_all = _join(train)
-        sig = _concat([hc.signals_from_recording(r, joint.ratio) for r in train])
+        sig = _concat([signals(r, joint) for r in train])
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             ls = hc.calibrate_lstsq(structure, (sig, jnp.concatenate([r.torque for r in train])))
@@ -79,17 +80,10 @@ def periodic_features_effect(
         for periodic in (False, True):
             feats = hn.build_features(train_all, joint, periodic=periodic)
 
-            def residual_inputs(rec, periodic=periodic):
-                return hybrid_inputs(
-                    rec,
-                    joint,
-                    compliance=ls,
-                    periodic=periodic,
-                    twist_rate=True,
-                    hysteresis=scales,
-                )
-
-            inp = _concat([residual_inputs(r) for r in train])
+            residual_options = dict(periodic=periodic, twist_rate=True, hysteresis=scales)
+            inp = _concat(
+                [hybrid_inputs(r, joint, compliance=ls, **residual_options) for r in train]
+            )
             for seed in seeds:
                 t0 = time.perf_counter()
                 net = hn.Network(feats.layout, hidden, key=jax.random.key(10 + seed))
@@ -114,12 +108,12 @@ def periodic_features_effect(
                     key=jax.random.key(21 + seed),
                 ).model
                 estimators = {
-                    "network": lambda rec, n=res.network: hn.estimate_torque(n, rec, joint),
-                    "residual": lambda rec, m=hyb, f=residual_inputs: predict_hybrid(m, f(rec)),
+                    "network": NetworkEstimator(res.network, joint),
+                    "residual": HybridEstimator(hyb, ls, joint, tuple(residual_options.items())),
                 }
-                for name, estimate in estimators.items():
+                for name, estimator in estimators.items():
                     for s, rec in test.items():
-                        m = error_metrics(np.asarray(estimate(rec)), rec.torque, tau0)
+                        m = error_metrics(np.asarray(estimator.estimate(rec)), rec.torque, tau0)
                         rows.append(
                             {
                                 "model": name,

@@ -6,10 +6,10 @@
 - [`hdjax.network.Network`][]: sigmoid hidden layers, eqs. (36)-(41).
 - [`hdjax.network.train_backprop`][] (the paper's eqs. (42)-(46)) and
   [`hdjax.network.train_optax`][] (jitted, full batch or minibatch).
-- [`hdjax.network.estimate_torque`][]: torque from a recording with a trained network.
+- [`hdjax.network.predict_torque`][]: torque from a recording with a trained network.
 """
 
-from ._estimate import estimate_torque as estimate_torque
+from ._estimate import predict_torque as predict_torque
 from ._features import (
     PAPER_INPUTS as PAPER_INPUTS,
     FeatureLayout as FeatureLayout,

@@ -10,8 +10,8 @@ from ._features import build_features
 from ._mlp import Network, predict
 
 
-def estimate_torque(network: Network, recording: Recording, joint: Joint) -> Float[Array, " n"]:
-    """Estimate the output torque of every sample of `recording` with a trained network.
+def predict_torque(network: Network, recording: Recording, joint: Joint) -> Float[Array, " n"]:
+    """Predict the output torque of every sample of `recording` with a trained network.
 
     The input vector is built with the options the network was trained with (its stored
     [`hdjax.network.FeatureLayout`][]: periodic angles, orders, Kalman-filtered current).
@@ -26,7 +26,7 @@ def estimate_torque(network: Network, recording: Recording, joint: Joint) -> Flo
     """
     if not isinstance(network, Network):
         raise ModelMismatchError(
-            f"estimate_torque needs an hdjax.network.Network, got {type(network).__name__}"
+            f"predict_torque needs an hdjax.network.Network, got {type(network).__name__}"
         )
     lay = network.layout
     feats = build_features(

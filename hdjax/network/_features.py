@@ -21,7 +21,7 @@ import numpy as np
 
 from .._custom_types import Array, Float
 from .._errors import ConfigError, DataError, ModelMismatchError
-from .._features import finite_difference_velocity, twist
+from .._features import signals
 from .._joint import Joint
 from .._recording import Recording
 from ._kalman import filter_current
@@ -112,12 +112,8 @@ def build_features(
         raise DataError(f"{recording.source}: need at least 2 samples to build features")
     if kalman:
         recording = filter_current(recording, output_period=None)
-    cols = {
-        "current": recording.current,
-        "omega_m": finite_difference_velocity(recording.t, recording.theta_m),
-        "omega_l": finite_difference_velocity(recording.t, recording.theta_l),
-        "twist": twist(recording.theta_m, recording.theta_l, joint.ratio, joint.twist_sign),
-    }
+    sig = signals(recording, joint)
+    cols = {name: sig.get(name) for name in ("current", "omega_m", "omega_l", "twist")}
     if periodic:
         for angle in ("theta_m", "theta_l"):
             theta = getattr(recording, angle)

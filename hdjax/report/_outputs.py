@@ -162,9 +162,16 @@ def check_output_dir(
         return "empty"
     marker = read_marker(out)
     if marker is None:
+        older = any((out / n).is_file() for n in ("metrics.json", "report.json"))
+        hint = (
+            " (a result of an hdjax version without the marker file? remove it yourself)"
+            if older
+            else ""
+        )
         raise ConfigError(
             f"{out}: not an hdjax result folder (it holds {_describe(out)}); hdjax replaces only "
-            f"a folder it wrote itself, even with --overwrite; choose another {flag}"
+            f"a folder it wrote itself and stamped with {MARKER}, even with --overwrite{hint}; "
+            f"choose another {flag}"
         )
     if not overwrite:
         raise ConfigError(

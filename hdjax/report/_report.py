@@ -138,8 +138,8 @@ class ResultDir:
         return p
 
     def write_bytes(self, rel: str, data: bytes) -> None:
+        from .._interrupts import check
         from .._io import atomic_write_bytes
-        from .._signals import check
 
         check()
         atomic_write_bytes(self.path(rel), data)
@@ -164,8 +164,8 @@ class ResultDir:
 
     def commit(self) -> Path:
         """Move the finished result into place (replacing the old one under `overwrite`)."""
+        from .._interrupts import check, critical
         from .._io import atomic_write_bytes
-        from .._signals import check, critical
         from ._outputs import check_output_dir, marker_bytes
 
         check()

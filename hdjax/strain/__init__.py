@@ -46,7 +46,7 @@ from ._experiments import (
     FRICTION_PAPER as FRICTION_PAPER,
     SineResult as SineResult,
     StaticResult as StaticResult,
-    StepResult as StepResult,
+    StepResponse as StepResponse,
     open_loop_error_friction as open_loop_error_friction,
     paper_joint as paper_joint,
     sine_tracking as sine_tracking,

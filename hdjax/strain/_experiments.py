@@ -115,7 +115,7 @@ def static_characteristic(
 # ---------------------------------------------------------------------------------------------
 
 
-class StepResult(NamedTuple):
+class StepResponse(NamedTuple):
     run: ControlRun
     steady_state_error_pct: float
     """$(T_d - T_J)/T_d$ in %, $T_J$ averaged over the last 20 ms."""
@@ -140,7 +140,7 @@ def step_response(
     amplitude: float = 5.0,
     duration: float = 0.2,
     t_step: float = 0.01,
-) -> StepResult:
+) -> StepResponse:
     """A torque step, Fig. 16 (the paper does not print the step size; 5 N·m as in Fig. 17)."""
     joint = paper_joint() if joint is None else joint
     sensor = IdealTorqueSensor() if sensor is None else sensor
@@ -158,7 +158,7 @@ def step_response(
         over = 100.0 * (float(np.max(y)) - final) / abs(final)
     else:
         rise, over = math.nan, math.nan
-    return StepResult(run, err_pct, rise, over)
+    return StepResponse(run, err_pct, rise, over)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -86,6 +86,7 @@ def handling():
     finally:
         for s, h in old.items():
             signal.signal(s, h if h is not None else signal.SIG_DFL)
+        _pending = None  # reported by the command; the next one starts clean
 
 
 def _exit_now(signum, frame):
