@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import difflib
 import math
 import os
 import tempfile
@@ -22,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._errors import ConfigError, DataError
+from ._errors import ConfigError, DataError, check_keys, did_you_mean as did_you_mean
 from ._recording import SIGNAL_COLUMNS, Recording, make_recording
 
 _COLUMN_KEYS = ("source", "scale", "offset", "counts_per_rev", "modulus")
@@ -114,16 +113,6 @@ def read_toml(path) -> dict:
         raise ConfigError(f"{where}: not valid TOML: {err}") from None
 
 
-def did_you_mean(name: str, options) -> str:
-    """A ` (did you mean 'x'?)` hint, or an empty string when nothing is close."""
-    options = list(options)
-    same_but_case = [o for o in options if o.lower() == name.lower() and o != name]
-    if same_but_case:  # 'theta_L' for 'theta_l' beats the equally close 'theta_m'
-        return f" (did you mean {same_but_case[0]!r}?)"
-    close = difflib.get_close_matches(name, options, n=1, cutoff=0.6)
-    return f" (did you mean {close[0]!r}?)" if close else ""
-
-
 @dataclasses.dataclass(frozen=True)
 class ColumnSpec:
     """How one schema column is read from a source column.
@@ -175,11 +164,7 @@ class ColumnMap:
         Each entry is either a source column name or a table with `source`, `scale`,
         `offset`, `counts_per_rev`, `modulus`.
         """
-        keys = ["columns", "extras", "encoding"]
-        unknown = set(table) - set(keys)
-        if unknown:
-            key = sorted(unknown)[0]
-            raise ConfigError(f"{where}: unknown key {key!r}{did_you_mean(key, keys)}")
+        check_keys(sorted(table), ["columns", "extras", "encoding"], where)
         for key in ("columns", "extras"):
             if table.get(key) is not None and not isinstance(table[key], Mapping):
                 raise ConfigError(f"{where}.{key} must be a table, got {table[key]!r}")
@@ -206,9 +191,7 @@ def _spec(entry, where: str) -> ColumnSpec:
         return ColumnSpec(source=entry)
     if not isinstance(entry, Mapping):
         raise ConfigError(f"{where}: expected a column name or a table, got {entry!r}")
-    for key in entry:
-        if key not in _COLUMN_KEYS:
-            raise ConfigError(f"{where}: unknown key {key!r}{did_you_mean(key, _COLUMN_KEYS)}")
+    check_keys(entry, _COLUMN_KEYS, where)
     if "source" not in entry:
         raise ConfigError(f"{where}: missing 'source' (the column name in the file)")
     scale = entry.get("scale")

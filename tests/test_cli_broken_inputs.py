@@ -1046,13 +1046,13 @@ class ReachedWork(BaseException):
 def stop_before_work(monkeypatch):
     import hdjax.cli._sweep
     import hdjax.compliance
-    import hdjax.config._pipeline
     import hdjax.discover._loop
+    import hdjax.pipelines._paper
 
     def stop(*a, **k):
         raise ReachedWork
 
-    monkeypatch.setattr(hdjax.config._pipeline, "calibrate", stop)
+    monkeypatch.setattr(hdjax.pipelines._paper, "calibrate", stop)
     monkeypatch.setattr(hdjax.compliance, "estimate_torque", stop)
     monkeypatch.setattr(hdjax.discover._loop, "discover", stop)
     monkeypatch.setattr(hdjax.cli._sweep, "_members_nested", stop)

@@ -6,10 +6,10 @@ import numpy as np
 
 from hdjax import Joint
 from hdjax.cli import main
-from hdjax.cli._sweep_fit import batched_estimates, nested_fit
 from hdjax.compliance import ComplianceModel, calibrate_lstsq, estimate_torque_arrays
+from hdjax.compliance._nested import batched_estimates, nested_fit
 from hdjax.config import synthetic_recording
-from hdjax.config._pipeline import stacked_signals
+from hdjax.pipelines._paper import stacked_signals
 
 JOINT = Joint(ratio=160.0, rated_torque=400.0)
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import hdjax
-from hdjax import compliance as hc, fit, network as hn, plant
+from hdjax import compliance as hc, fit, network as hn, pipelines, plant
 
 JOINT = hdjax.Joint(ratio=160, rated_torque=400)
 
@@ -54,4 +54,4 @@ def test_solution_results_say_what_to_do():
 
 
 def test_comparison_methods_are_a_loop_over_fitters():
-    assert tuple(fit.FITTERS) == fit.METHOD_NAMES
+    assert tuple(pipelines.FITTERS) == pipelines.METHOD_NAMES

@@ -66,8 +66,9 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
     """Carry out an experiment into a [`hdjax.report.ResultDir`][]; returns a text summary."""
     import numpy as np
 
-    from ..config import _pipeline as P, build_dataset, dumps_toml, save_model
+    from ..config import build_dataset, dumps_toml, save_model
     from ..config._preflight import check_angles
+    from ..pipelines import _paper as P
     from ..report import environment
 
     t_start = time.perf_counter()
@@ -216,7 +217,7 @@ def _row(metrics: dict, method: str, scenario: str):
 
 def render_report(cfg: dict, metrics: dict, figures: list[tuple[str, str]]) -> str:
     """The `report.md` of a run: what ran, the error table (with the paper's), figures."""
-    from ..config import _pipeline as P
+    from ..pipelines import _paper as P
     from ..report import markdown_table
 
     env = metrics["environment"]

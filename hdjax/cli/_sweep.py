@@ -316,7 +316,7 @@ def _pooled(torques: dict, ds) -> dict:
 def _member_loop(cfg: dict, ds, method: str, seed: int) -> dict:
     """Fit and score one member on its own (any setting)."""
     from .._errors import HdjaxError
-    from ..config import _pipeline as P
+    from ..pipelines import _paper as P
 
     t0 = time.perf_counter()
     try:
@@ -348,8 +348,8 @@ def _members_nested(exp, setting, values, todo, cfgs, ds, progress):
     """Polynomial / Fourier orders: one Gram pass, per-member solves, one batched estimate."""
     import numpy as np
 
-    from ..config import _pipeline as P
-    from ._sweep_fit import batched_estimates, nested_fit
+    from ..compliance._nested import batched_estimates, nested_fit
+    from ..pipelines import _paper as P
 
     scale = P.current_scale(exp, ds.train)
     vmax = max(values[i] for i in todo)

@@ -87,9 +87,11 @@ def _base_h(model: ComplianceModel, sig: Signals) -> list:
     return out
 
 
-def _calibrated_segments(model: ComplianceModel) -> np.ndarray:
+def calibrated_segments(model: ComplianceModel, active=None) -> np.ndarray:
+    """Which segments a model with these active flags (default its own) can invert in: the
+    segment's compliance and, per segment, at least one of its base terms are calibrated."""
     n_seg, nb = model.n_segments, model.n_base
-    act = np.asarray(model.active)
+    act = np.asarray(model.active if active is None else active)
     ok = act[:n_seg].copy()
     if model.per_segment and nb:
         for s in range(n_seg):
@@ -104,7 +106,7 @@ def _piecewise(model: ComplianceModel, r, hs: list, g):
     segment the candidate $T_s$, its signed distance outside the segment and its depth inside.
     """
     k = model.k
-    ok = _calibrated_segments(model)
+    ok = calibrated_segments(model)
     bounds = model.segment_bounds
     default_width = 2.0 * model.rated_torque / model.n_segments
     tol = EDGE_TOLERANCE * model.rated_torque
@@ -283,7 +285,7 @@ def _check_estimable(model: ComplianceModel) -> None:
     msg = check_invertible(model)
     if msg:
         raise InversionError(msg)
-    if not _calibrated_segments(model).any():
+    if not calibrated_segments(model).any():
         raise InversionError("the model has no calibrated segment; calibrate it first")
 
 

@@ -24,8 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.signal
 
-from .._errors import ConfigError
-from .._io import did_you_mean
+from .._errors import ConfigError, did_you_mean
 from .._recording import Recording
 from ._controller import default_gains
 from ._effects import _concrete

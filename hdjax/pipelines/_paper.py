@@ -19,6 +19,7 @@ from .._features import Signals, signals
 from .._joint import Joint
 from .._metrics import error_metrics
 from .._recording import Recording
+from ..compliance import ComplianceModel, calibrate_lstsq, calibrate_rls, estimate_torque
 
 PAPER_MS_PER_100 = {"model": 9.232, "network": 25.442}
 """Song et al. Section IV.B: time to estimate 100 torques on an i7-7700H [ms]."""
@@ -64,8 +65,6 @@ def current_scale(cfg: dict, train: list[Recording]) -> float:
 
 def build_model(cfg: dict, joint: Joint, scale: float):
     """The uncalibrated [`hdjax.compliance.ComplianceModel`][] of a `[model]` table."""
-    from ..compliance import ComplianceModel
-
     m = cfg["model"]
     return ComplianceModel.paper(
         joint,
@@ -93,8 +92,6 @@ def calibrate(cfg: dict, model, train: list[Recording], warn=None):
 
     Warnings (terms the data cannot reach) go to `warn` (a callable) when given.
     """
-    from ..compliance import calibrate_lstsq, calibrate_rls
-
     fit = cfg["fit"]
     data = None if fit.get("chunk") and fit["method"] == "lstsq" else stacked_signals(model, train)
     with warnings.catch_warnings(record=True) as caught:
@@ -121,8 +118,6 @@ def calibrate(cfg: dict, model, train: list[Recording], warn=None):
 
 def estimate_model(model, recordings: dict[str, Recording]) -> dict:
     """Torque estimates of a calibrated model on each recording (name -> TorqueEstimate)."""
-    from ..compliance import estimate_torque
-
     return {name: estimate_torque(model, rec) for name, rec in recordings.items()}
 
 
