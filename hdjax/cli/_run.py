@@ -66,7 +66,7 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
     """Carry out an experiment into a [`hdjax.report.ResultDir`][]; returns a text summary."""
     import numpy as np
 
-    from ..config import build_dataset, dumps_toml, save_model
+    from ..config import build_dataset, dumps_toml, save_model, with_absolute_paths
     from ..config._preflight import check_angles
     from ..pipelines import _paper as P
     from ..report import environment
@@ -202,7 +202,7 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
         f"(hdjax {metrics['environment']['hdjax_version']}, seed {seed}).\n"
         f"Source: {exp.path}\nRe-run: hdjax run config.resolved.toml --out OTHER"
     )
-    rd.write_text("config.resolved.toml", dumps_toml(dict(cfg), header=header))
+    rd.write_text("config.resolved.toml", dumps_toml(with_absolute_paths(exp), header=header))
     report = render_report(cfg, metrics, figures)
     rd.write_text("report.md", report)
     rd.write_json("metrics.json", metrics)

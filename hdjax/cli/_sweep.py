@@ -155,7 +155,7 @@ def run_sweep(
 def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force):
     import numpy as np
 
-    from ..config import build_dataset, dumps_toml
+    from ..config import build_dataset, dumps_toml, with_absolute_paths
     from ..config._preflight import check_angles
     from ..report import environment, find_knee, markdown_table, sweep_figure
 
@@ -271,7 +271,9 @@ def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force)
     rd.write_text("report.md", "\n".join(lines))
     rd.write_text(
         "config.resolved.toml",
-        dumps_toml(dict(exp), header=f"Sweep over {setting} = {values!r}; source {exp.path}"),
+        dumps_toml(
+            with_absolute_paths(exp), header=f"Sweep over {setting} = {values!r}; source {exp.path}"
+        ),
     )
     rd.write_json("metrics.json", metrics)
     rd.commit()
