@@ -16,7 +16,8 @@ JOINT = hdjax.Joint(ratio=160, rated_torque=400)
 
 @pytest.fixture(scope="module")
 def rec():
-    r = plant.simulate_scenario("fast", key=jax.random.PRNGKey(5), duration=2.0)
+    # the recording of test_signals.py (one compiled simulation serves both)
+    r = plant.simulate_scenario("fast", key=jax.random.PRNGKey(3), duration=4.0)
     return r.select(np.asarray(r.t) >= 0.2)
 
 

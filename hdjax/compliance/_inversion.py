@@ -39,7 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, Bool, Float, Int
-from .._errors import InversionError
+from .._errors import InversionError, ModelMismatchError
 from .._features import signals
 from .._recording import Recording
 from ._lstsq import check_invertible
@@ -253,8 +253,6 @@ def estimate_torque(model: ComplianceModel, data) -> TorqueEstimate:
         and name not in data.extras
     ]
     if missing:
-        from .._errors import ModelMismatchError
-
         raise ModelMismatchError(
             f"the model uses column(s) {', '.join(sorted(set(missing)))} that the data lacks; "
             "supply them or use a model calibrated without them"
@@ -305,8 +303,6 @@ def torque_estimator(model: ComplianceModel):
         if name is not None
     } - {"twist", "current", "theta_m", "theta_l", "omega_m", "omega_l"}
     if needs:
-        from .._errors import ModelMismatchError
-
         raise ModelMismatchError(
             f"the one-sample estimator takes no extra columns, but the model uses "
             f"{', '.join(sorted(needs))}; use estimate_torque with Signals instead"

@@ -29,6 +29,7 @@ from .._recording import Recording
 from ._controller import default_gains
 from ._effects import _concrete
 from ._params import PlantParams, song_params, with_effects
+from ._sensors import SensorConfig
 from ._simulate import (
     DEFAULT_MEMORY_LIMIT,
     Drive,
@@ -206,8 +207,6 @@ def simulate_scenarios(
 
     **Returns:** a dict name -> [`hdjax.Recording`][].
     """
-    from ._sensors import SensorConfig
-
     names = tuple(names)
     params = _prepare(names, params, effects, duration, dt)
     stride = output_period / dt
