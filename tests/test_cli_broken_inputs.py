@@ -995,6 +995,14 @@ def _train_on_ratio_csv(root: Path):
 CASES += [
     ("run-ratio", RUN + ["--out", "o"], _train_on_ratio_csv, 2, None, ["ratio is 160", "--force"]),
     ("sweep-ratio", SWEEP + ["--out", "o"], _train_on_ratio_csv, 2, None, ["ratio is 160"]),
+    (
+        "run-ratio-force",  # the fit cannot be inverted: said once, as the error, with the cause
+        RUN + ["--out", "o", "--force"],
+        _train_on_ratio_csv,
+        2,
+        None,
+        ["cannot be inverted", "Likely cause (run with --force)", "ratio is 160"],
+    ),
 ]
 
 
