@@ -9,8 +9,10 @@ from __future__ import annotations
 import math
 import re
 
-# a script's label may cite the tracker ("(issue 2)"); user docs never do
+# a script's label may cite the tracker ("(issue 2)") or name its temporary folder; user docs
+# never show either
 _TRACKER = re.compile(r"\s*\(issues? #?\d+[^)]*\)")
+_TEMP = re.compile(r"/tmp/[^\s,;|)]*")
 
 PAGE = "docs/benchmarks.md"
 SNAPSHOT = "docs/benchmarks/results.json"
@@ -29,7 +31,8 @@ def _fmt(value) -> str:
         return f"{value:.4g}"
     if value is None:
         return ""
-    return _TRACKER.sub("", str(value)).replace("|", "\\|").replace("\n", " ")
+    text = _TEMP.sub("(a temporary folder)", _TRACKER.sub("", str(value)))
+    return text.replace("|", "\\|").replace("\n", " ")
 
 
 def _flatten(value, prefix=""):
@@ -58,7 +61,13 @@ def _rows_table(rows: list[dict]) -> str:
 
 def _section(entry: dict) -> str:
     command = " ".join(["python", entry["script"], *entry["args"]])
-    out = [f"## `{entry['script'].split('/')[-1]}`\n", f"`{command}`, {entry['seconds']:.1f} s\n"]
+    when = ""
+    if entry.get("date"):
+        when = f", run {entry['date']} (load average {entry.get('load_average', '?')})"
+    out = [
+        f"## `{entry['script'].split('/')[-1]}`\n",
+        f"`{command}`, {entry['seconds']:.1f} s{when}\n",
+    ]
     if entry.get("error"):
         out.append(
             f"**Failed** (exit code {entry['returncode']}):\n\n```text\n{entry['error']}\n```\n"
@@ -81,7 +90,7 @@ def _section(entry: dict) -> str:
 
 def _is_target_flag(key: str, shown: str) -> bool:
     last = key.split(".")[-1]
-    named = last in ("target_met", "met") or last.startswith("met_")
+    named = last == "met" or last.endswith("_met") or last.startswith("met_")
     return named and shown in ("yes", "**no**")
 
 
@@ -97,9 +106,10 @@ def render(snapshot: dict) -> str:
         "benchmark scripts print; rerun it to measure your machine (`--quick` uses smaller",
         "problems; `--only NAME` reruns one script). Timings depend on the machine and its load.",
         "",
-        f"- date: {snapshot['date']}, commit `{snapshot['commit']}`, {mode}",
+        f"- latest run: {snapshot['date']}, commit `{snapshot['commit']}`, {mode}",
         f"- machine: {machine['cpu']}, {machine['cpus']} CPUs, {machine['platform']}",
-        f"- load average at the start: {machine['load_average']}",
+        f"- load average at the start of the latest run: {machine['load_average']} (the machine is"
+        " shared; each section gives its own run's date and load where recorded)",
         f"- Python {machine['python']}, JAX {machine['jax']}, float64",
         "",
         "| script | seconds | targets met |",

@@ -12,7 +12,7 @@ Run: `python benchmarks/bench_network.py [--hidden 20] [--n-train 6000]`; prints
 
 `--periodic` measures instead what the periodic angle features (sin/cos of the angles, beyond the
 paper) do on plant data, with the plant's kinematic error on and off
-([`hdjax.fit.periodic_features_effect`][]); writes `periodic_features.json` to `--out`, prints
+([`hdjax.pipelines.periodic_features_effect`][]); writes `periodic_features.json` to `--out`, prints
 the JSON and a Markdown table. `--duration` sets the seconds per scenario recording.
 """
 
@@ -192,11 +192,11 @@ def _machine():
 
 
 def bench_periodic(args):
-    from hdjax import fit
+    from hdjax import pipelines
 
     t0 = time.perf_counter()
     hidden = (32,) if args.hidden is None else tuple(args.hidden)
-    result = fit.periodic_features_effect(
+    result = pipelines.periodic_features_effect(
         duration=args.duration, hidden=hidden, steps=args.steps, verbose=True
     )
     result["total_time_s"] = time.perf_counter() - t0
@@ -206,7 +206,7 @@ def bench_periodic(args):
     out.mkdir(parents=True, exist_ok=True)
     (out / "periodic_features.json").write_text(json.dumps(result, indent=2))
     print(json.dumps(result["summary"], indent=2))
-    print(fit.format_periodic_table(result))
+    print(pipelines.format_periodic_table(result))
 
 
 def main():

@@ -6,7 +6,7 @@ streamed fit runs in a fresh process whose peak resident set size (getrusage ru_
 measured. Reference, timed in the same run: the in-memory `calibrate_lstsq` of the first
 10^6 samples (time, memory, and the agreement of the streamed fit with it on those samples).
 
-    python benchmarks/bench_stream_parquet.py [--samples 100000000] [--chunk 1048576]
+    python benchmarks/bench_stream_parquet.py [--samples 100000000] [--chunk 524288]
 """
 
 import argparse
@@ -70,7 +70,7 @@ def write_parquet(path, n, chunk):
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--samples", type=int, default=100_000_000)
-    ap.add_argument("--chunk", type=int, default=1 << 20)
+    ap.add_argument("--chunk", type=int, default=1 << 19)
     ap.add_argument("--reference-samples", type=int, default=1_000_000)
     ap.add_argument("--dir", help="where to put the temporary Parquet files (default: /tmp)")
     args = ap.parse_args()

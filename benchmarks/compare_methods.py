@@ -23,7 +23,7 @@ from pathlib import Path
 import jax
 
 import hdjax  # noqa: F401  (float64)
-from hdjax import fit
+from hdjax import pipelines
 
 
 def main():
@@ -41,7 +41,7 @@ def main():
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    result = fit.compare_methods(
+    result = pipelines.compare_methods(
         duration=args.duration,
         steps=args.steps,
         hidden=tuple(args.hidden),
@@ -57,8 +57,8 @@ def main():
     }
     result["precision"] = "float64"
     (out / "compare_methods.json").write_text(json.dumps(result, indent=2))
-    fit.plot_comparison(result, out / "compare_methods.png")
-    print(fit.format_table(result))
+    pipelines.plot_comparison(result, out / "compare_methods.png")
+    print(pipelines.format_table(result))
     print(json.dumps(result["best"], indent=2))
 
 

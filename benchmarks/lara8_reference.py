@@ -22,7 +22,8 @@ import jax
 import numpy as np
 
 import hdjax
-from hdjax.config import _pipeline as P, build_dataset, load_experiment
+from hdjax.config import build_dataset, load_experiment
+from hdjax.pipelines import _paper as P
 from hdjax.reference import (
     detect_holds,
     fit_offset_with_payload,

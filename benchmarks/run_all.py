@@ -39,6 +39,10 @@ QUICK = {
     "bench_sweep.py": ["--samples", "20000", "--repeats", "2"],
     "bench_network.py": ["--n-train", "2000", "--epochs", "50"],
     "compare_methods.py": ["--duration", "10", "--steps", "300"],
+    "bench_discover_long.py": ["--samples", "100000"],
+    "bench_fleet.py": ["--samples", "5000", "--logs", "4"],
+    "bench_stream_parquet.py": ["--samples", "4000000", "--reference-samples", "500000"],
+    "bench_warm_start.py": ["--samples", "20000"],
 }
 
 
@@ -64,6 +68,8 @@ def run_one(script: str, quick: bool, timeout: float) -> dict:
     args = QUICK.get(script, []) if quick else []
     command = [sys.executable, str(HERE / script), *args]
     print(f"[run_all] {' '.join(['python', 'benchmarks/' + script, *args])}", file=sys.stderr)
+    date = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else ""
     start = time.perf_counter()
     try:
         done = subprocess.run(
@@ -74,7 +80,14 @@ def run_one(script: str, quick: bool, timeout: float) -> dict:
         code, out, err = -1, exc.stdout or "", f"timed out after {timeout:.0f} s"
         out = out.decode() if isinstance(out, bytes) else out
     seconds = time.perf_counter() - start
-    entry = {"script": f"benchmarks/{script}", "args": args, "seconds": seconds, "returncode": code}
+    entry = {
+        "script": f"benchmarks/{script}",
+        "args": args,
+        "seconds": seconds,
+        "returncode": code,
+        "date": date,
+        "load_average": load,
+    }
     result = _last_json(out) if code == 0 else None
     if result is None:
         tail = (err or out).strip().splitlines()[-8:]

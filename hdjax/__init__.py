@@ -17,6 +17,8 @@ Sub-packages (imported on first access, so `import hdjax` stays light):
   regression term, candidates).
 - `hdjax.strain`: Hashimoto et al. (1993) strain-gauge sensing and joint torque control.
 - `hdjax.reference`: joint-torque references from a force/torque sensor and the arm's Jacobian.
+- `hdjax.pipelines`: the experiment pipelines (the paper run, method comparison, periodic
+  features) above the model packages.
 - `hdjax.report`: metrics, figures and reports.
 """
 
@@ -76,6 +78,7 @@ _SUBPACKAGES = (
     "effects",
     "strain",
     "reference",
+    "pipelines",
     "report",
     "config",
 )

@@ -6,6 +6,8 @@ found, what was expected and how to fix it. The command line turns these into on
 and a non-zero exit; a traceback from hdjax means a bug.
 """
 
+import difflib
+
 
 class HdjaxError(Exception):
     """Base class of every error hdjax raises on bad input."""
@@ -37,3 +39,26 @@ class DivergenceError(HdjaxError, RuntimeError):
 
 class UnitWarning(UserWarning):
     """A signal's magnitude suggests a unit mix-up (degrees for radians, counts for radians)."""
+
+
+def did_you_mean(name: str, options) -> str:
+    """A ` (did you mean 'x'?)` hint, or an empty string when nothing is close."""
+    options = list(options)
+    same_but_case = [o for o in options if o.lower() == name.lower() and o != name]
+    if same_but_case:  # 'theta_L' for 'theta_l' beats the equally close 'theta_m'
+        return f" (did you mean {same_but_case[0]!r}?)"
+    close = difflib.get_close_matches(name, options, n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def check_keys(table, known, where: str, *, inside: str = "") -> None:
+    """Raise `ConfigError` for the first key of `table` not in `known`, with a "did you mean"
+    hint and the known keys: `"{where}: unknown key 'x'{inside} (did you mean 'y'?); known keys:
+    ..."`."""
+    known = list(known)
+    for key in table:
+        if key not in known:
+            raise ConfigError(
+                f"{where}: unknown key {key!r}{inside}{did_you_mean(str(key), known)}; known "
+                f"keys: {', '.join(map(str, known))}"
+            )

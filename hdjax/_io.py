@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import difflib
 import math
 import os
 import tempfile
@@ -22,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._errors import ConfigError, DataError
+from ._errors import ConfigError, DataError, check_keys, did_you_mean as did_you_mean
 from ._recording import SIGNAL_COLUMNS, Recording, make_recording
 
 _COLUMN_KEYS = ("source", "scale", "offset", "counts_per_rev", "modulus")
@@ -51,6 +50,50 @@ def check_encoding(name, *, where: str = "encoding") -> str:
         ) from None
 
 
+_BOM = b"\xef\xbb\xbf"
+
+
+def text_codec(head: bytes, where, encoding: str | None = None, *, hint: str = "") -> tuple:
+    """How to read a file that starts with the bytes `head`, under the rules of
+    [`decode_text`][]: `(codec, start)`, the codec and the number of leading bytes to skip
+    (a UTF-8 byte-order mark, as spreadsheets write it), so that byte positions count from
+    the file's first byte.
+
+    **Raises:** [`hdjax.DataError`][] for UTF-16/32 text when no encoding is named.
+    """
+    name = "utf-8" if encoding is None else check_encoding(encoding)
+    if name != "utf-8":
+        return name, 0
+    for bom, what in ((b"\xff\xfe", "UTF-16 or UTF-32"), (b"\xfe\xff", "UTF-16")):
+        if head.startswith(bom):
+            raise DataError(
+                f"{where}: the file is {what} text, not UTF-8; {hint or _ENCODING_HINT}"
+            )
+    return "utf-8", 3 if head.startswith(_BOM) else 0
+
+
+def bad_byte_error(where, encoding, byte: int, pos: int, line: int, hint: str = "") -> DataError:
+    """The one line for a byte that does not decode: the file, the byte, its position."""
+    return DataError(
+        f"{where}: not valid {encoding or 'UTF-8'} text: byte 0x{byte:02x} at byte position "
+        f"{pos} (line {line}); {hint or _ENCODING_HINT}"
+    )
+
+
+def nul_byte_error(where, pos: int) -> DataError:
+    """The one line for a NUL character (the file is not text)."""
+    return DataError(
+        f"{where}: a NUL byte at byte position {pos}, so this is not a text file; give a text "
+        "file (or a .npz / .parquet recording)"
+    )
+
+
+def nul_position(text: str, nul: int, codec: str, start: int = 0) -> int:
+    """The byte position of `text[nul]` in a file whose bytes from `start` on decode to `text`
+    with `codec`."""
+    return start + len(text[:nul].encode(codec))
+
+
 def decode_text(data: bytes, where, encoding: str | None = None, *, hint: str = "") -> str:
     """Text of a file's bytes: UTF-8 with or without a byte-order mark by default, else the
     named `encoding`.
@@ -58,28 +101,16 @@ def decode_text(data: bytes, where, encoding: str | None = None, *, hint: str = 
     **Raises:** [`hdjax.DataError`][] naming the file and the byte position of the first byte
     that does not decode (and the line it is on), for UTF-16/32 text and for NUL bytes.
     """
-    hint = hint or _ENCODING_HINT
-    name = "utf-8" if encoding is None else check_encoding(encoding)
-    if name == "utf-8":
-        for bom, what in ((b"\xff\xfe", "UTF-16 or UTF-32"), (b"\xfe\xff", "UTF-16")):
-            if data.startswith(bom):
-                raise DataError(f"{where}: the file is {what} text, not UTF-8; {hint}")
-        name = "utf-8-sig"  # a spreadsheet's byte-order mark is dropped
+    name, start = text_codec(data, where, encoding, hint=hint)
     try:
-        text = data.decode(name)
+        text = str(memoryview(data)[start:], name)
     except UnicodeDecodeError as err:
-        line = data.count(b"\n", 0, err.start) + 1
-        raise DataError(
-            f"{where}: not valid {encoding or 'UTF-8'} text: byte 0x{data[err.start]:02x} at byte "
-            f"position {err.start} (line {line}); {hint}"
-        ) from None
+        at = start + err.start
+        line = data.count(b"\n", 0, at) + 1
+        raise bad_byte_error(where, encoding, data[at], at, line, hint) from None
     nul = text.find("\x00")
     if nul >= 0:
-        pos = len(text[:nul].encode(name))
-        raise DataError(
-            f"{where}: a NUL byte at byte position {pos}, so this is not a text file; give a text "
-            "file (or a .npz / .parquet recording)"
-        )
+        raise nul_byte_error(where, nul_position(text, nul, name, start))
     return text
 
 
@@ -112,16 +143,6 @@ def read_toml(path) -> dict:
         m = re.search(r"\(at line (\d+), column (\d+)\)", str(err))
         where = f"{path}:{m.group(1)}:{m.group(2)}" if m else str(path)
         raise ConfigError(f"{where}: not valid TOML: {err}") from None
-
-
-def did_you_mean(name: str, options) -> str:
-    """A ` (did you mean 'x'?)` hint, or an empty string when nothing is close."""
-    options = list(options)
-    same_but_case = [o for o in options if o.lower() == name.lower() and o != name]
-    if same_but_case:  # 'theta_L' for 'theta_l' beats the equally close 'theta_m'
-        return f" (did you mean {same_but_case[0]!r}?)"
-    close = difflib.get_close_matches(name, options, n=1, cutoff=0.6)
-    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -175,11 +196,7 @@ class ColumnMap:
         Each entry is either a source column name or a table with `source`, `scale`,
         `offset`, `counts_per_rev`, `modulus`.
         """
-        keys = ["columns", "extras", "encoding"]
-        unknown = set(table) - set(keys)
-        if unknown:
-            key = sorted(unknown)[0]
-            raise ConfigError(f"{where}: unknown key {key!r}{did_you_mean(key, keys)}")
+        check_keys(sorted(table), ["columns", "extras", "encoding"], where)
         for key in ("columns", "extras"):
             if table.get(key) is not None and not isinstance(table[key], Mapping):
                 raise ConfigError(f"{where}.{key} must be a table, got {table[key]!r}")
@@ -206,9 +223,7 @@ def _spec(entry, where: str) -> ColumnSpec:
         return ColumnSpec(source=entry)
     if not isinstance(entry, Mapping):
         raise ConfigError(f"{where}: expected a column name or a table, got {entry!r}")
-    for key in entry:
-        if key not in _COLUMN_KEYS:
-            raise ConfigError(f"{where}: unknown key {key!r}{did_you_mean(key, _COLUMN_KEYS)}")
+    check_keys(entry, _COLUMN_KEYS, where)
     if "source" not in entry:
         raise ConfigError(f"{where}: missing 'source' (the column name in the file)")
     scale = entry.get("scale")

@@ -7,8 +7,8 @@ import math
 from collections.abc import Mapping
 from pathlib import Path
 
-from ._errors import ConfigError
-from ._io import did_you_mean, read_toml
+from ._errors import ConfigError, check_keys
+from ._io import read_toml
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,13 +54,7 @@ class Joint:
     @classmethod
     def from_dict(cls, table: Mapping, *, where: str = "[joint]") -> Joint:
         """Build from a `[joint]` table; unknown keys get a "did you mean" answer."""
-        fields = [f.name for f in dataclasses.fields(cls)]
-        for key in table:
-            if key not in fields:
-                raise ConfigError(
-                    f"{where}: unknown key {key!r}{did_you_mean(key, fields)}; known keys: "
-                    f"{', '.join(fields)}"
-                )
+        check_keys(table, [f.name for f in dataclasses.fields(cls)], where)
         for key in ("ratio", "rated_torque"):
             if key not in table:
                 raise ConfigError(f"{where}: missing required key {key!r} (a positive number)")

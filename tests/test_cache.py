@@ -12,8 +12,9 @@ from hdjax._cache import cache_dir
 from hdjax.cli import _compilation_cache
 from tests.conftest import REPO
 
-# Runs one CLI command in a fresh process and prints how long each backend compilation took
-# (JAX's own monitoring event) and how many programs came from the persistent cache.
+# Runs one CLI command in a fresh process and prints the durations of JAX's backend-compile
+# events (a compilation, or on a cache hit the load of the compiled program) and how many
+# programs came from the persistent cache.
 PROBE = """
 import json, sys
 import jax.monitoring as mon

@@ -86,7 +86,7 @@ def test_user_docs_name_no_issue_and_no_outside_path():
     for path in _user_texts():
         text = path.read_text()
         assert not re.search(r"\bissues? \d+|#\d{1,3}\b", text), path
-        assert "../shared" not in text and "/work/" not in text, path
+        assert "../shared" not in text and "/work/" not in text and "/tmp/" not in text, path
 
 
 def _blocks(page: str, lang: str) -> list[str]:

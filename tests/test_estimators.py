@@ -9,14 +9,15 @@ import numpy as np
 import pytest
 
 import hdjax
-from hdjax import compliance as hc, fit, network as hn, plant
+from hdjax import compliance as hc, fit, network as hn, pipelines, plant
 
 JOINT = hdjax.Joint(ratio=160, rated_torque=400)
 
 
 @pytest.fixture(scope="module")
 def rec():
-    r = plant.simulate_scenario("fast", key=jax.random.PRNGKey(5), duration=2.0)
+    # the recording of test_signals.py (one compiled simulation serves both)
+    r = plant.simulate_scenario("fast", key=jax.random.PRNGKey(3), duration=4.0)
     return r.select(np.asarray(r.t) >= 0.2)
 
 
@@ -54,4 +55,4 @@ def test_solution_results_say_what_to_do():
 
 
 def test_comparison_methods_are_a_loop_over_fitters():
-    assert tuple(fit.FITTERS) == fit.METHOD_NAMES
+    assert tuple(pipelines.FITTERS) == pipelines.METHOD_NAMES

@@ -15,7 +15,7 @@ from hdjax.compliance import (
     calibrate_stream,
 )
 from hdjax.config import synthetic_recording
-from hdjax.config._pipeline import stacked_signals
+from hdjax.pipelines._paper import stacked_signals
 
 JOINT = hdjax.Joint(ratio=100.0, rated_torque=100.0)
 CHUNK = 777  # not a divisor of the recording lengths: every recording ends in a short chunk
@@ -95,9 +95,12 @@ def test_stream_from_parquet_and_config_chunk(recs, tmp_path):
     ref = calibrate_stream(m, RecordingStream.from_recordings(recs, 512), chunk=512)
     files = calibrate_stream(m, RecordingStream.from_files(paths, chunk=512), chunk=512)
     np.testing.assert_array_equal(np.asarray(files.model.coef), np.asarray(ref.model.coef))
+    # 4000 = 3 * 1333 + 1: the file's one-row tail is folded into a longer last chunk
+    tail = calibrate_stream(m, RecordingStream.from_files(paths, chunk=1333), chunk=1333)
+    assert_same_fit(calibrate_lstsq(m, stacked_signals(m, recs)), tail)
     # the [fit] chunk setting routes the pipeline's calibration through the stream
     from hdjax.config import experiment_from_dict
-    from hdjax.config._pipeline import calibrate
+    from hdjax.pipelines._paper import calibrate
 
     exp = experiment_from_dict(
         {"joint": JOINT.to_dict(), "data": {"kind": "synthetic"}, "fit": {"chunk": 512}}

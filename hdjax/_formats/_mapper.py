@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._errors import DataError
-from .._io import ColumnMap, ColumnSpec, did_you_mean
+from .._errors import DataError, did_you_mean
+from .._io import ColumnMap, ColumnSpec
 from .._recording import SIGNAL_COLUMNS, make_recording
 
 

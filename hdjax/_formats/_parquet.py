@@ -26,7 +26,10 @@ def _pq():
 def _open(path: Path):
     pq = _pq()
     try:
-        return pq.ParquetFile(path)
+        # pre_buffer (pyarrow's default) keeps every row group read so far in its memory pool,
+        # so a long log's read would grow without bound (measured); without it memory stays
+        # at about one row group
+        return pq.ParquetFile(path, pre_buffer=False)
     except Exception as err:  # pyarrow raises its own ArrowInvalid / OSError family
         raise DataError(
             f"{path}: not a readable Parquet file ({' '.join(str(err).split())})"

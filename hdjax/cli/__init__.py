@@ -14,8 +14,7 @@ import os
 import sys
 import warnings
 
-from .._errors import HdjaxError
-from .._io import did_you_mean
+from .._errors import HdjaxError, did_you_mean
 from ._common import Parser, ParserExit, UsageError
 
 COMMANDS = ("run", "sweep", "estimate", "discover", "bench", "convert", "fleet")

@@ -59,9 +59,9 @@ def bench_sweep(n_samples: int, repeats: int, progress=None) -> dict:
 
     from .._joint import Joint
     from ..compliance import ComplianceModel, calibrate_lstsq, estimate_torque
+    from ..compliance._nested import nested_fit
     from ..config import synthetic_recording
-    from ..config._pipeline import PAPER_MS_PER_100, stacked_signals
-    from ._sweep_fit import nested_fit
+    from ..pipelines._paper import PAPER_MS_PER_100, stacked_signals
 
     say = progress or (lambda m: None)
     joint = Joint(ratio=160.0, rated_torque=400.0)

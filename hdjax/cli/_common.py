@@ -6,8 +6,7 @@ import argparse
 import sys
 import time
 
-from .._errors import ConfigError
-from .._io import did_you_mean
+from .._errors import ConfigError, did_you_mean
 
 
 class UsageError(Exception):

@@ -39,7 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, Bool, Float, Int
-from .._errors import InversionError
+from .._errors import InversionError, ModelMismatchError
 from .._features import signals
 from .._recording import Recording
 from ..effects import SEGMENT_START
@@ -88,9 +88,11 @@ def _base_h(model: ComplianceModel, sig: Signals) -> list:
     return out
 
 
-def _calibrated_segments(model: ComplianceModel) -> np.ndarray:
+def calibrated_segments(model: ComplianceModel, active=None) -> np.ndarray:
+    """Which segments a model with these active flags (default its own) can invert in: the
+    segment's compliance and, per segment, at least one of its base terms are calibrated."""
     n_seg, nb = model.n_segments, model.n_base
-    act = np.asarray(model.active)
+    act = np.asarray(model.active if active is None else active)
     ok = act[:n_seg].copy()
     if model.per_segment and nb:
         for s in range(n_seg):
@@ -105,7 +107,7 @@ def _piecewise(model: ComplianceModel, r, hs: list, g):
     segment the candidate $T_s$, its signed distance outside the segment and its depth inside.
     """
     k = model.k
-    ok = _calibrated_segments(model)
+    ok = calibrated_segments(model)
     bounds = model.segment_bounds
     default_width = 2.0 * model.rated_torque / model.n_segments
     tol = EDGE_TOLERANCE * model.rated_torque
@@ -302,8 +304,6 @@ def estimate_torque(model: ComplianceModel, data) -> TorqueEstimate:
         and name not in data.extras
     ]
     if missing:
-        from .._errors import ModelMismatchError
-
         raise ModelMismatchError(
             f"the model uses column(s) {', '.join(sorted(set(missing)))} that the data lacks; "
             "supply them or use a model calibrated without them"
@@ -334,7 +334,7 @@ def _check_estimable(model: ComplianceModel) -> None:
     msg = check_invertible(model)
     if msg:
         raise InversionError(msg)
-    if not _calibrated_segments(model).any():
+    if not calibrated_segments(model).any():
         raise InversionError("the model has no calibrated segment; calibrate it first")
 
 
@@ -354,8 +354,6 @@ def torque_estimator(model: ComplianceModel):
         if name is not None
     } - {"twist", "current", "theta_m", "theta_l", "omega_m", "omega_l"}
     if needs:
-        from .._errors import ModelMismatchError
-
         raise ModelMismatchError(
             f"the one-sample estimator takes no extra columns, but the model uses "
             f"{', '.join(sorted(needs))}; use estimate_torque with Signals instead"

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, Float
-from .._errors import CalibrationError, ConfigError
+from .._errors import CalibrationError, ConfigError, InversionError
 from ._lstsq import (
     CalibrationResult,
     _SegmentedDesign,
@@ -187,8 +187,6 @@ def calibrate_rls(
     fitted = _with_static(fitted, active=tuple(bool(x) for x in active))
     msg = check_invertible(fitted)
     if msg and throw:
-        from .._errors import InversionError
-
         raise InversionError(msg)
     return CalibrationResult(
         model=fitted,

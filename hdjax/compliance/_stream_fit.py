@@ -275,9 +275,8 @@ def _fused_passes(model, stream, chunk):
     each in one compiled program ([`fused_columns`][]), the Dahl states carried in it."""
     n_paths = sum(t.torque_kind == "path" for t in model.effect_terms)
     z = jnp.asarray(np.tile([0.0, np.nan], (max(n_paths, 1), 1)))  # (state, last driver)
-    length = chunk + 1
-    for win, lo, hi in windows(stream, 1, 0, length):
-        w = np.zeros(length)
+    for win, lo, hi in windows(stream, 1, 0, chunk + 1):
+        w = np.zeros(win.t.shape[0])  # chunk + 1, or more for a file's folded one-row tail
         w[lo:hi] = 1.0
         cols, b, tq, seg, z = fused_columns(model, win, jnp.asarray(w), z)
         x = np.stack([np.asarray(c)[lo:hi] for c in cols])

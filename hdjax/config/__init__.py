@@ -23,6 +23,7 @@ from ._load import (
     load_experiment as load_experiment,
     parse_toml as parse_toml,
     parse_value as parse_value,
+    with_absolute_paths as with_absolute_paths,
 )
 from ._preflight import check_memory as check_memory, preflight as preflight
 from ._saved_model import (

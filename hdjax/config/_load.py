@@ -93,6 +93,32 @@ def experiment_from_dict(doc: Mapping, *, base_dir=None, where: str = "config") 
 # Writing (tomllib only reads; the resolved config holds only tables, lists and scalars)
 
 
+def with_absolute_paths(exp: Experiment) -> dict:
+    """A copy of a resolved config whose file settings (`[data]` train and test, the
+    `[data.reference]` DH table or URDF) are absolute paths, so the `config.resolved.toml` a
+    result directory keeps still finds its files when it is run from there."""
+    import copy
+    import os
+
+    base = exp.base_dir
+    absolute = lambda name: os.path.normpath(base / Path(name).expanduser())
+    cfg = copy.deepcopy(dict(exp))
+    data = cfg.get("data", {})
+    if isinstance(data.get("train"), list):
+        data["train"] = [absolute(n) for n in data["train"]]
+    tests = data.get("test")
+    if isinstance(tests, list):
+        data["test"] = [absolute(n) for n in tests]
+    elif isinstance(tests, dict):
+        data["test"] = {k: absolute(n) for k, n in tests.items()}
+    ref = data.get("reference")
+    if isinstance(ref, dict):
+        for key in ("dh", "urdf"):
+            if isinstance(ref.get(key), str) and ref[key]:
+                ref[key] = absolute(ref[key])
+    return cfg
+
+
 def _key(k: str) -> str:
     return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else _string(k)
 

@@ -13,8 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 
-from .._errors import ConfigError
-from .._io import did_you_mean
+from .._errors import ConfigError, check_keys, did_you_mean
 from .._joint import Joint
 from ..reference._spec import check_reference
 
@@ -254,12 +253,7 @@ def resolve(doc: Mapping, *, where: str = "config") -> dict:
         given = doc.get(table, {})
         if not isinstance(given, Mapping):
             raise ConfigError(f"{where}: [{table}] must be a table, got {given!r}")
-        for key in given:
-            if key not in spec:
-                raise ConfigError(
-                    f"{where}: unknown key {key!r} in [{table}]{did_you_mean(key, spec)}; known "
-                    f"keys: {', '.join(spec)}"
-                )
+        check_keys(given, spec, where, inside=f" in [{table}]")
         clean = {}
         for key, (default, check) in spec.items():
             if key in given:

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._errors import ConfigError
-from .._io import ColumnMap, did_you_mean, read_toml
+from .._errors import ConfigError, check_keys, did_you_mean
+from .._io import ColumnMap, read_toml
 from .._joint import Joint
 
 _DATA_KEYS = ("path", "train", "test", "test_blocks", "columns", "extras", "encoding", "reference")
@@ -57,9 +57,7 @@ def load_discover_config(path):
     data = doc.get("data")
     if not data:
         raise ConfigError(f"{path}: no [data] table")
-    for key in data:
-        if key not in _DATA_KEYS:
-            raise ConfigError(f"{path} [data]: unknown key {key!r}{did_you_mean(key, _DATA_KEYS)}")
+    check_keys(data, _DATA_KEYS, f"{path} [data]")
     colmap = None
     if "columns" in data or "extras" in data or "encoding" in data:
         colmap = ColumnMap.from_dict(
@@ -90,9 +88,5 @@ def load_discover_config(path):
     else:
         raise ConfigError(f"{path} [data]: give either 'path' or both 'train' and 'test'")
     options = doc.get("discover", {})
-    for key in options:
-        if key not in _DISCOVER_KEYS:
-            raise ConfigError(
-                f"{path} [discover]: unknown key {key!r}{did_you_mean(key, _DISCOVER_KEYS)}"
-            )
+    check_keys(options, _DISCOVER_KEYS, f"{path} [discover]")
     return train, test, joint, options, notes

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import effects
+from .._plotting import pyplot
 from ._loop import ARCSEC, DiscoveryResult, residual_spectra
 
 STOPPING_RULE = (
@@ -72,10 +73,7 @@ def report_dict(result: DiscoveryResult, *, extra: dict | None = None) -> dict:
 
 
 def _plot_spectra(spectra, chosen, title, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(len(spectra) or 1, 1, figsize=(8, 2.6 * max(1, len(spectra))))
     axes = np.atleast_1d(axes)
@@ -95,10 +93,7 @@ def _plot_spectra(spectra, chosen, title, path):
 
 
 def _plot_residual_vs_angle(model, data, title, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     from ..compliance._lstsq import prepare
 
@@ -118,10 +113,7 @@ def _plot_residual_vs_angle(model, data, title, path):
 
 
 def _plot_torque(result: DiscoveryResult, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     from .._features import find_gaps
 
@@ -157,10 +149,7 @@ def _plot_torque(result: DiscoveryResult, path):
 
 
 def _plot_progress(result: DiscoveryResult, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     labels = ["start"] + [s.key for s in result.steps]
     rms = [result.baseline.rms] + [s.test.rms for s in result.steps]

@@ -25,8 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, Float
-from .._errors import ConfigError
-from .._io import did_you_mean
+from .._errors import ConfigError, did_you_mean
 from ._base import (
     SEGMENT_START,
     TORQUE_PATH,

@@ -9,8 +9,7 @@ the saved-model type table ([`term_types`][]), the plant's effect names and slot
 
 from __future__ import annotations
 
-from .._errors import ConfigError
-from .._io import did_you_mean
+from .._errors import ConfigError, did_you_mean
 from ._base import AbstractFamily, AbstractTerm, PlantEffect
 
 _FAMILIES: list[AbstractFamily] = []

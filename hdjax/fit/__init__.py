@@ -1,12 +1,5 @@
 """Joint gradient fitting of compliance model, network and plant parameters."""
 
-from ._compare import (
-    FITTERS as FITTERS,
-    METHOD_NAMES as METHOD_NAMES,
-    compare_methods as compare_methods,
-    format_table as format_table,
-    plot_comparison as plot_comparison,
-)
 from ._estimators import (
     AbstractEstimator as AbstractEstimator,
     ComplianceEstimator as ComplianceEstimator,
@@ -35,8 +28,4 @@ from ._linear import (
     LinearProblem as LinearProblem,
     fit_compliance_gradient as fit_compliance_gradient,
     linear_problem as linear_problem,
-)
-from ._periodic import (
-    format_periodic_table as format_periodic_table,
-    periodic_features_effect as periodic_features_effect,
 )

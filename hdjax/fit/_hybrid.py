@@ -37,7 +37,9 @@ import optimistix as optx
 
 from .._custom_types import PRNGKeyArray
 from .._errors import ConfigError, DataError, DivergenceError, ModelMismatchError
+from ..compliance import estimate_torque_arrays
 from ..network import FeatureLayout, Network, standardise
+from ..plant import motor_friction
 from ._inputs import HybridInputs
 
 PLANT_FIELDS = ("torque_constant", "inertia_m", "coulomb_m", "viscous_m")
@@ -70,8 +72,6 @@ class HybridModel(eqx.Module):
 
     def motor_torque(self, inp: HybridInputs):
         r"""$T_d = N(K_t I + J_M\alpha_m + F_m(\omega_m))$ with the fitted plant parameters."""
-        from ..plant import motor_friction
-
         m = jnp.exp(self.plant_log)
         p = self.plant
         p = eqx.tree_at(
@@ -99,8 +99,6 @@ class HybridModel(eqx.Module):
 
     def __call__(self, inp: HybridInputs):
         """Torque estimate [N·m] for every row of `inp`."""
-        from ..compliance import estimate_torque_arrays
-
         tau = jnp.zeros(inp.x.shape[0], jnp.float64)
         if self.compliance is not None:
             tau = tau + estimate_torque_arrays(self.fitted_compliance, inp.sig)

@@ -31,6 +31,7 @@ from .._errors import ConfigError
 from .._features import signals, smoothed_velocity
 from .._joint import Joint
 from .._recording import Recording
+from ..compliance import dahl_state
 from ..network import FeatureLayout, build_features
 
 TWIST_RATE_HALF_WINDOW = 2
@@ -109,8 +110,6 @@ def dynamic_columns(
     Dahl states $z_k = z_{k-1} + \frac{\Delta\theta_k - \Delta\theta_{k-1}}{s}
     (1 - z_{k-1}\,\mathrm{sgn}(\cdot))$, each starting at 0 at the first sample.
     """
-    from ..compliance import dahl_state
-
     scales = _check_positive("hysteresis", hysteresis)
     tw = signals(recording, joint).twist
     cols = {}

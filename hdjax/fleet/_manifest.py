@@ -35,8 +35,8 @@ import hashlib
 import json
 from pathlib import Path
 
-from .._errors import ConfigError
-from .._io import ColumnMap, did_you_mean, read_toml
+from .._errors import ConfigError, did_you_mean
+from .._io import ColumnMap, read_toml
 from .._joint import Joint
 
 TASKS = ("calibrate", "calibrate+discover", "estimate")

@@ -23,8 +23,7 @@ and grows with the recorded torque (see `hdjax/plant/_dynamics.py`).
 from __future__ import annotations
 
 from .. import effects
-from .._errors import ConfigError
-from .._io import did_you_mean
+from .._errors import ConfigError, did_you_mean
 from ..effects._base import check_slot, concrete as _concrete
 
 __all__ = ["EFFECT_NAMES", "check_effect_name", "make_effect", "_concrete"]

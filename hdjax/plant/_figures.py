@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import ConfigError, DataError
+from .._plotting import pyplot
 from .._recording import Recording
 
 
@@ -34,10 +35,7 @@ def plot_scenario(recording: Recording, path, *, ratio: float = 160.0, title: st
         raise ConfigError(f"cannot write {path}: folder {path.parent} does not exist")
     if recording.torque is None:
         raise DataError(f"recording {recording.source!r} has no torque column to plot")
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     cols = recording.to_numpy()
     t = cols["t"]

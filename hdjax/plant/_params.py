@@ -16,8 +16,7 @@ import numpy as np
 
 from .. import effects as _effects_registry
 from .._custom_types import Array, Float
-from .._errors import ConfigError
-from .._io import did_you_mean
+from .._errors import ConfigError, did_you_mean
 from ._effects import _concrete, check_effect_name, make_effect
 
 _f64 = lambda x: jnp.asarray(x, jnp.float64)

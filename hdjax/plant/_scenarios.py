@@ -24,12 +24,12 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.signal
 
-from .._errors import ConfigError
-from .._io import did_you_mean
+from .._errors import ConfigError, did_you_mean
 from .._recording import Recording
 from ._controller import default_gains
 from ._effects import _concrete
 from ._params import PlantParams, song_params, with_effects
+from ._sensors import SensorConfig
 from ._simulate import (
     DEFAULT_MEMORY_LIMIT,
     Drive,
@@ -207,8 +207,6 @@ def simulate_scenarios(
 
     **Returns:** a dict name -> [`hdjax.Recording`][].
     """
-    from ._sensors import SensorConfig
-
     names = tuple(names)
     params = _prepare(names, params, effects, duration, dt)
     stride = output_period / dt

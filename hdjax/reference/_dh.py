@@ -31,8 +31,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, Float
-from .._errors import ConfigError
-from .._io import did_you_mean, read_toml
+from .._errors import ConfigError, did_you_mean
+from .._io import read_toml
 
 CONVENTIONS = ("standard", "modified")
 _TABLE_KEYS = ("name", "convention", "angle_unit", "links", "tool", "source")

@@ -29,8 +29,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
-from .._errors import ConfigError
-from .._io import did_you_mean
+from .._errors import ConfigError, did_you_mean
 
 KINDS = ("column", "wrench")
 OFFSETS = ("none", "rest", "fit")

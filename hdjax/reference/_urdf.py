@@ -17,8 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._errors import ConfigError
-from .._io import did_you_mean
+from .._errors import ConfigError, did_you_mean
 from ._jacobian import FRAMES
 
 

@@ -10,16 +10,12 @@ import io
 
 import numpy as np
 
+from .._plotting import pyplot
+
 _METHOD_LABEL = {"model": "model-based (eqs. 7-10, 26-27)", "network": "BP network (eqs. 36-46)"}
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    return plt
+_plt = pyplot
 
 
 def _png(fig) -> bytes:

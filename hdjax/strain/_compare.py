@@ -20,6 +20,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
+from ..plant import zero_state
 from ._bridge_sensor import AbstractTorqueSensor, IdealTorqueSensor, StrainGaugeSensor
 from ._control import hashimoto_controller
 from ._deformation import DeformationSensor
@@ -121,8 +122,6 @@ def compare_feedback(
 
     **Returns:** a [`hdjax.strain.Comparison`][].
     """
-    from ..plant import zero_state
-
     joint = paper_joint(
         constrained=False,
         smoothing=smoothing,

@@ -22,6 +22,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._errors import ConfigError
+from ..plant import hashimoto_params, with_effects
 from ._bridge_sensor import AbstractTorqueSensor, IdealTorqueSensor
 from ._control import RATED_TORQUE_PAPER, TorqueController, hashimoto_controller
 from ._plant_joint import PlantJoint
@@ -55,8 +56,6 @@ def paper_joint(
     - `smoothing`: its smooth-sign width $\omega_s$ [rad/s].
     - `effects`: further plant effects (e.g. `{"hysteresis": True}`).
     """
-    from ..plant import hashimoto_params, with_effects
-
     if not (friction >= 0 and smoothing > 0):
         raise ConfigError(
             f"friction must be >= 0 and smoothing > 0, got {friction!r}, {smoothing!r}"

@@ -17,6 +17,7 @@ import numpy as np
 
 from .._errors import ConfigError
 from .._io import atomic_write_bytes
+from .._plotting import pyplot
 from ._bridge_sensor import StrainGaugeSensor
 from ._compare import compare_feedback
 from ._control import RATED_TORQUE_PAPER, hashimoto_controller, steady_state_error
@@ -32,14 +33,7 @@ from ._experiments import (
 from ._gauges import FlexsplineGeometry, misalignment_error_index, resolved_torque_gain
 from ._stability import loop_poles
 
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+_pyplot = pyplot
 
 
 def _save(fig, path: Path) -> str:

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import ConfigError
+from ..plant import PlantParams, flexspline_torque, rk4_step, zero_state
 
 
 class PlantJoint(eqx.Module):
@@ -34,26 +35,18 @@ class PlantJoint(eqx.Module):
     load_torque: float = 0.0
 
     def __check_init__(self):
-        from ..plant import PlantParams
-
         if not isinstance(self.params, PlantParams):
             raise ConfigError(
                 f"PlantJoint.params must be hdjax.plant.PlantParams, got {type(self.params)}"
             )
 
     def initial_state(self):
-        from ..plant import zero_state
-
         return zero_state()
 
     def observe(self, state):
-        from ..plant import flexspline_torque
-
         return state.theta_m, state.theta_l, flexspline_torque(self.params, state)
 
     def step(self, state, tau_m, dt):
-        from ..plant import rk4_step
-
         new = rk4_step(self.params, state, tau_m, self.load_torque, dt)
         if self.constrained:
             new = eqx.tree_at(

@@ -27,10 +27,16 @@ from .. import compliance as hc, network as hn, plant
 from .._features import signals
 from .._joint import Joint
 from .._metrics import error_metrics
+from ..fit import (
+    HybridEstimator,
+    NetworkEstimator,
+    dahl_scales,
+    fit_hybrid,
+    hybrid_inputs,
+    make_hybrid,
+)
+from ..report import markdown_table
 from ._compare import _concat, _join
-from ._estimators import HybridEstimator, NetworkEstimator
-from ._hybrid import fit_hybrid, make_hybrid
-from ._inputs import dahl_scales, hybrid_inputs
 
 KINEMATIC_EFFECTS = ("harmonic_m", "harmonic_l")
 """The plant effects that make up its kinematic error (switched off for the 'off' case)."""
@@ -182,9 +188,7 @@ def summarise(rows: list[dict]) -> list[dict]:
 
 
 def format_periodic_table(result: dict) -> str:
-    """The summary of [`hdjax.fit.periodic_features_effect`][] as a Markdown table."""
-    from ..report import markdown_table
-
+    """The summary of [`hdjax.pipelines.periodic_features_effect`][] as a Markdown table."""
     header = ["model", "kinematic error", "scenario", "RMS % plain", "RMS % periodic"]
     header += ["max % plain", "max % periodic", "RMS plain / periodic"]
     rows = [

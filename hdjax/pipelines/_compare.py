@@ -24,11 +24,21 @@ from .. import compliance as hc, network as hn, plant
 from .._features import signals
 from .._joint import Joint
 from .._metrics import error_metrics
+from .._plotting import pyplot
+from .._recording import Recording
 from .._solution import RESULTS, Solution
-from ._estimators import ComplianceEstimator, HybridEstimator, NetworkEstimator
-from ._hybrid import fit_hybrid, make_hybrid
-from ._inputs import DAHL_FRACTIONS, dahl_scales, hybrid_inputs
-from ._linear import fit_compliance_gradient
+from ..fit import (
+    DAHL_FRACTIONS,
+    ComplianceEstimator,
+    HybridEstimator,
+    NetworkEstimator,
+    dahl_scales,
+    fit_compliance_gradient,
+    fit_hybrid,
+    hybrid_inputs,
+    make_hybrid,
+)
+from ..report import markdown_table
 
 METHOD_NAMES = (
     "lstsq",
@@ -51,8 +61,6 @@ def _concat(trees):
 
 def _join(recs):
     """One recording from several, time shifted to keep increasing (extras dropped)."""
-    from .._recording import Recording
-
     ts, off = [], 0.0
     for r in recs:
         t = np.asarray(r.t)
@@ -195,7 +203,7 @@ def compare_methods(
 
     - `duration`: seconds per scenario recording (the plant's default is 60 s).
     - `train_key`, `test_key`: PRNG keys of the training and test recordings (default 0 and 1).
-    - `methods`: a subset of [`hdjax.fit.METHOD_NAMES`][].
+    - `methods`: a subset of [`hdjax.pipelines.METHOD_NAMES`][].
     - `scenarios`: a subset of the plant's scenarios (default all four).
     - `hidden`: hidden widths of the networks of the hybrid and joint fits.
     - `steps`: Adam steps of the hybrid and joint fits.
@@ -330,8 +338,6 @@ def compare_methods(
 
 def format_table(result: dict) -> str:
     """The comparison as a Markdown table."""
-    from ..report import markdown_table
-
     header = ["method", "scenario", "RMS [N·m]", "max [N·m]", "RMS %", "max %", "fit [s]"]
     keys = ("rms", "max", "rms_pct", "max_pct", "fit_time_s", "estimate_us_per_sample")
     rows = [[r["method"], r["scenario"], *(f"{r[k]:.3g}" for k in keys)] for r in result["rows"]]
@@ -340,10 +346,7 @@ def format_table(result: dict) -> str:
 
 def plot_comparison(result: dict, path) -> None:
     """Grouped bars of RMS and maximum error (% of rated torque) per scenario and method."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     rows = result["rows"]
     methods = list(dict.fromkeys(r["method"] for r in rows))

@@ -14,11 +14,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import network as nw
 from .._errors import ConfigError
 from .._features import Signals, signals
 from .._joint import Joint
 from .._metrics import error_metrics
 from .._recording import Recording
+from ..compliance import (
+    ComplianceModel,
+    RecordingStream,
+    calibrate_lstsq,
+    calibrate_rls,
+    calibrate_stream,
+    estimate_torque,
+)
 
 PAPER_MS_PER_100 = {"model": 9.232, "network": 25.442}
 """Song et al. Section IV.B: time to estimate 100 torques on an i7-7700H [ms]."""
@@ -64,8 +73,6 @@ def current_scale(cfg: dict, train: list[Recording]) -> float:
 
 def build_model(cfg: dict, joint: Joint, scale: float):
     """The uncalibrated [`hdjax.compliance.ComplianceModel`][] of a `[model]` table."""
-    from ..compliance import ComplianceModel
-
     m = cfg["model"]
     return ComplianceModel.paper(
         joint,
@@ -93,8 +100,6 @@ def calibrate(cfg: dict, model, train: list[Recording], warn=None):
 
     Warnings (terms the data cannot reach) go to `warn` (a callable) when given.
     """
-    from ..compliance import calibrate_lstsq, calibrate_rls
-
     fit = cfg["fit"]
     data = None if fit.get("chunk") and fit["method"] == "lstsq" else stacked_signals(model, train)
     with warnings.catch_warnings(record=True) as caught:
@@ -108,8 +113,6 @@ def calibrate(cfg: dict, model, train: list[Recording], warn=None):
                 init_samples=fit["init_samples"] or None,
             )
         elif data is None:
-            from ..compliance import RecordingStream, calibrate_stream
-
             stream = RecordingStream.from_recordings(train, fit["chunk"])
             result = calibrate_stream(model, stream, chunk=fit["chunk"], throw=False)
         else:
@@ -121,8 +124,6 @@ def calibrate(cfg: dict, model, train: list[Recording], warn=None):
 
 def estimate_model(model, recordings: dict[str, Recording]) -> dict:
     """Torque estimates of a calibrated model on each recording (name -> TorqueEstimate)."""
-    from ..compliance import estimate_torque
-
     return {name: estimate_torque(model, rec) for name, rec in recordings.items()}
 
 
@@ -161,8 +162,6 @@ def train_network(cfg: dict, joint: Joint, train: list[Recording], seed: int, va
     (every k-th sample); features are built per recording so velocities and the Kalman filter
     never straddle two recordings.
     """
-    from .. import network as nw
-
     n_cfg = cfg["network"]
     feats = [
         nw.build_features(
@@ -221,8 +220,6 @@ def train_network(cfg: dict, joint: Joint, train: list[Recording], seed: int, va
 
 def estimate_network(net, joint: Joint, recordings: dict[str, Recording]) -> dict:
     """Torque estimates of a trained network on each recording (name -> array)."""
-    from .. import network as nw
-
     return {name: nw.predict_torque(net, rec, joint) for name, rec in recordings.items()}
 
 

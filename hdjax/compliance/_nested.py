@@ -7,7 +7,9 @@ columns, never forming the $n \times p$ design), and each member solves its own 
 $G_{SS} x = (A^\top b)_S$ — column-scaled, by Cholesky, with one refinement step against the
 true residual (corrected semi-normal equations, as [`hdjax.compliance.calibrate_lstsq`][] does),
 the refinement of all members in one batched pass over the data. A member whose scaled
-condition number exceeds $10^6$ falls back to `calibrate_lstsq` alone.
+condition number exceeds `CSNE_MAX_COND` ($10^6$) is solved from one Householder QR of the
+largest design instead. The helpers (the compact column layout, the scaled QR, the active-term
+selection, `CSNE_MAX_COND`) are those of [`hdjax.compliance.calibrate_lstsq`][].
 
 Held-out estimates are batched too: a member is the largest model with zero coefficients for
 the columns it lacks, so all members with the same calibrated segments are inverted in one
@@ -25,24 +27,14 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 
-CSNE_MAX_COND = 1e6
+from ._inversion import calibrated_segments, estimate_torque_arrays
+from ._lstsq import CSNE_MAX_COND, _compact_index, _scaled_qr, _select_active, check_invertible
 
 
 @eqx.filter_jit
 def _compact(model, sig, torque):
     parts = [model.hinge_basis(torque), model.base_columns(sig), model.effect_columns(sig, torque)]
     return jnp.concatenate(parts, axis=1), model.segment_index(torque)
-
-
-def _blocks(model) -> list[np.ndarray]:
-    """For each segment (or the one shared block), where the compact columns sit in `coef`."""
-    n_seg, nb, ne = model.n_segments, model.n_base, model.n_effect
-    eff = model.n_coef - ne
-    out = []
-    for s in range(n_seg if model.per_segment else 1):
-        off = n_seg + (s * nb if model.per_segment else 0)
-        out.append(np.r_[np.arange(n_seg), off + np.arange(nb), eff + np.arange(ne)])
-    return out
 
 
 @eqx.filter_jit
@@ -52,7 +44,7 @@ def _gram(model, sig, torque):
     p = model.n_coef
     g = jnp.zeros((p, p), c.dtype)
     atb = jnp.zeros((p,), c.dtype)
-    for s, idx in enumerate(_blocks(model)):
+    for s, idx in enumerate(_compact_index(model)):
         cm = c if not model.per_segment else c * (seg == s).astype(c.dtype)[:, None]
         g = g.at[np.ix_(idx, idx)].add(cm.T @ c)
         atb = atb.at[idx].add(cm.T @ b)
@@ -64,7 +56,7 @@ def _residual_atr(model, sig, torque, coefs):
     r"""$A^\top (b - A x_m)$ for a batch of coefficient vectors `coefs` (M, p)."""
     c, seg = _compact(model, sig, torque)
     b = sig.twist
-    blocks = _blocks(model)
+    blocks = _compact_index(model)
     fits = jnp.stack([c @ coefs[:, i].T for i in blocks], axis=1)  # (n, n_blocks, M)
     if len(blocks) == 1:
         fit = fits[:, 0, :]
@@ -76,13 +68,6 @@ def _residual_atr(model, sig, torque, coefs):
         cm = c if not model.per_segment else c * (seg == s).astype(c.dtype)[:, None]
         atr = atr.at[:, i].add((cm.T @ r).T)
     return atr
-
-
-def _select(model, nonzero: np.ndarray, torque: np.ndarray):
-    """Active coefficients, segment counts and dropped terms, as calibrate_lstsq decides."""
-    from ..compliance._lstsq import select_active
-
-    return select_active(model, nonzero.astype(np.float64)[None, :], torque)
 
 
 @dataclasses.dataclass
@@ -98,16 +83,6 @@ class NestedMember:
     note: str = ""
     coef_big: np.ndarray | None = None
     active_big: np.ndarray | None = None
-
-
-@eqx.filter_jit
-def _scaled_r(model, sig, torque):
-    """R of the column-scaled design augmented by the twist (Householder QR, R only)."""
-    a = model.design(sig, torque)
-    norms = jnp.sqrt(jnp.sum(a * a, axis=0))
-    scale = jnp.where(norms > 0, norms, 1.0)
-    aug = jnp.concatenate([a / scale[None, :], sig.twist[:, None]], axis=1)
-    return jnp.linalg.qr(aug, mode="r"), scale
 
 
 def nested_fit(big, members: list, sig, torque) -> tuple[list[NestedMember], float]:
@@ -129,8 +104,6 @@ def nested_fit(big, members: list, sig, torque) -> tuple[list[NestedMember], flo
     **Returns:** `(results, shared_s)`: one [`NestedMember`][] per member and the time of the
     shared passes [s].
     """
-    from ..compliance import check_invertible
-
     t0 = time.perf_counter()
     g, atb, btb = jax.block_until_ready(_gram(big, sig, torque))
     g, atb, btb = np.asarray(g), np.asarray(atb), float(btb)
@@ -146,7 +119,7 @@ def nested_fit(big, members: list, sig, torque) -> tuple[list[NestedMember], flo
             idx = np.asarray([big_names[name] for name in model.term_names])
         except KeyError as err:
             raise ValueError(f"member term {err} is not a column of the largest model") from None
-        active, _, _ = _select(model, nonzero_big[idx], t_np)
+        active, _, _ = _select_active(model, nonzero_big[idx], t_np)
         cols = idx[active]
         d = np.sqrt(np.diag(g)[cols])
         gs = g[np.ix_(cols, cols)] / np.outer(d, d)
@@ -162,18 +135,21 @@ def nested_fit(big, members: list, sig, torque) -> tuple[list[NestedMember], flo
     hard = [e for e in prepared if "x" not in e]
     if hard:
         t2 = time.perf_counter()
-        r_aug, scale = jax.block_until_ready(_scaled_r(big, sig, torque))
-        r_aug, scale = np.asarray(r_aug), np.asarray(scale)
+        # R of the column-scaled design augmented by the twist (Householder QR, R only)
+        everything = jnp.ones(big.n_coef, bool)
+        qtb, r, scale = jax.block_until_ready(
+            _scaled_qr(big.design(sig, torque), sig.twist, everything)
+        )
+        qtb, r, scale = np.asarray(qtb), np.asarray(r), np.asarray(scale)
         shared_s += time.perf_counter() - t2
-        p = big.n_coef
         for e in hard:
             t3 = time.perf_counter()
             cols = e["cols"]
-            rs = r_aug[:p, cols]
+            rs = r[:, cols]
             sv = np.linalg.svd(rs, compute_uv=False)
             e["cond"] = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
             e["rank"] = int((sv > 1e-10 * sv[0]).sum())
-            y = np.linalg.lstsq(rs, r_aug[:p, p], rcond=None)[0]
+            y = np.linalg.lstsq(rs, qtb, rcond=None)[0]
             e["x"] = y / scale[cols]
             e["own_s"] += time.perf_counter() - t3
     # -- one batched refinement pass for the Cholesky members: x <- x + G^-1 A^T (b - A x) --
@@ -225,28 +201,15 @@ def nested_fit(big, members: list, sig, torque) -> tuple[list[NestedMember], flo
     return results, shared_s
 
 
-def calibrated_segments(model, active) -> tuple[bool, ...]:
-    """Which segments a model with these active flags can invert in (as the estimator does)."""
-    n_seg, nb = model.n_segments, model.n_base
-    act = np.asarray(active)
-    ok = act[:n_seg].copy()
-    if model.per_segment and nb:
-        for s in range(n_seg):
-            ok[s] &= act[n_seg + s * nb : n_seg + (s + 1) * nb].any()
-    return tuple(bool(x) for x in ok)
-
-
 def batched_estimates(big, fits: list[NestedMember], sig) -> list[np.ndarray | None]:
     """Held-out torque of every nested member, members with the same calibrated segments in one
     `vmap` over coefficient vectors of the largest structure."""
-    from ..compliance import estimate_torque_arrays
-
     out: list = [None] * len(fits)
     groups: dict = {}
     for i, f in enumerate(fits):
         if f.coef_big is None or f.message:
             continue
-        groups.setdefault(calibrated_segments(big, f.active_big), []).append(i)
+        groups.setdefault(tuple(calibrated_segments(big, f.active_big)), []).append(i)
     for members in groups.values():
         union = np.zeros(big.n_coef, bool)
         for i in members:

@@ -1,0 +1,32 @@
+"""The one place hdjax sets up matplotlib (an optional dependency, imported on first use).
+
+matplotlib is imported lazily, inside [`pyplot`][], so that `import hdjax` stays light and works
+without it; every figure of the package goes through this helper, which selects the
+non-interactive Agg backend (figures are written to files, never shown).
+"""
+
+from __future__ import annotations
+
+from ._errors import ConfigError
+
+
+def pyplot():
+    """`matplotlib.pyplot` with the Agg backend; `ConfigError` saying how to install it if
+    matplotlib is missing."""
+    try:
+        import matplotlib  # optional dependency: imported on first use (see module docstring)
+    except ImportError as err:  # pragma: no cover - depends on the environment
+        raise ConfigError(
+            f"figures need matplotlib ({err}); install it (pip install matplotlib) or turn "
+            "figures off"
+        ) from err
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig, path, *, dpi: int = 110) -> None:
+    """Write `fig` to `path` and close it."""
+    fig.savefig(path, dpi=dpi)
+    pyplot().close(fig)
