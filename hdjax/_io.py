@@ -50,6 +50,50 @@ def check_encoding(name, *, where: str = "encoding") -> str:
         ) from None
 
 
+_BOM = b"\xef\xbb\xbf"
+
+
+def text_codec(head: bytes, where, encoding: str | None = None, *, hint: str = "") -> tuple:
+    """How to read a file that starts with the bytes `head`, under the rules of
+    [`decode_text`][]: `(codec, start)`, the codec and the number of leading bytes to skip
+    (a UTF-8 byte-order mark, as spreadsheets write it), so that byte positions count from
+    the file's first byte.
+
+    **Raises:** [`hdjax.DataError`][] for UTF-16/32 text when no encoding is named.
+    """
+    name = "utf-8" if encoding is None else check_encoding(encoding)
+    if name != "utf-8":
+        return name, 0
+    for bom, what in ((b"\xff\xfe", "UTF-16 or UTF-32"), (b"\xfe\xff", "UTF-16")):
+        if head.startswith(bom):
+            raise DataError(
+                f"{where}: the file is {what} text, not UTF-8; {hint or _ENCODING_HINT}"
+            )
+    return "utf-8", 3 if head.startswith(_BOM) else 0
+
+
+def bad_byte_error(where, encoding, byte: int, pos: int, line: int, hint: str = "") -> DataError:
+    """The one line for a byte that does not decode: the file, the byte, its position."""
+    return DataError(
+        f"{where}: not valid {encoding or 'UTF-8'} text: byte 0x{byte:02x} at byte position "
+        f"{pos} (line {line}); {hint or _ENCODING_HINT}"
+    )
+
+
+def nul_byte_error(where, pos: int) -> DataError:
+    """The one line for a NUL character (the file is not text)."""
+    return DataError(
+        f"{where}: a NUL byte at byte position {pos}, so this is not a text file; give a text "
+        "file (or a .npz / .parquet recording)"
+    )
+
+
+def nul_position(text: str, nul: int, codec: str, start: int = 0) -> int:
+    """The byte position of `text[nul]` in a file whose bytes from `start` on decode to `text`
+    with `codec`."""
+    return start + len(text[:nul].encode(codec))
+
+
 def decode_text(data: bytes, where, encoding: str | None = None, *, hint: str = "") -> str:
     """Text of a file's bytes: UTF-8 with or without a byte-order mark by default, else the
     named `encoding`.
@@ -57,28 +101,16 @@ def decode_text(data: bytes, where, encoding: str | None = None, *, hint: str = 
     **Raises:** [`hdjax.DataError`][] naming the file and the byte position of the first byte
     that does not decode (and the line it is on), for UTF-16/32 text and for NUL bytes.
     """
-    hint = hint or _ENCODING_HINT
-    name = "utf-8" if encoding is None else check_encoding(encoding)
-    if name == "utf-8":
-        for bom, what in ((b"\xff\xfe", "UTF-16 or UTF-32"), (b"\xfe\xff", "UTF-16")):
-            if data.startswith(bom):
-                raise DataError(f"{where}: the file is {what} text, not UTF-8; {hint}")
-        name = "utf-8-sig"  # a spreadsheet's byte-order mark is dropped
+    name, start = text_codec(data, where, encoding, hint=hint)
     try:
-        text = data.decode(name)
+        text = str(memoryview(data)[start:], name)
     except UnicodeDecodeError as err:
-        line = data.count(b"\n", 0, err.start) + 1
-        raise DataError(
-            f"{where}: not valid {encoding or 'UTF-8'} text: byte 0x{data[err.start]:02x} at byte "
-            f"position {err.start} (line {line}); {hint}"
-        ) from None
+        at = start + err.start
+        line = data.count(b"\n", 0, at) + 1
+        raise bad_byte_error(where, encoding, data[at], at, line, hint) from None
     nul = text.find("\x00")
     if nul >= 0:
-        pos = len(text[:nul].encode(name))
-        raise DataError(
-            f"{where}: a NUL byte at byte position {pos}, so this is not a text file; give a text "
-            "file (or a .npz / .parquet recording)"
-        )
+        raise nul_byte_error(where, nul_position(text, nul, name, start))
     return text
 
 

@@ -892,7 +892,42 @@ CASES += [
         _edit("proj/data.csv", _with_extra_latin1),
         2,
         None,
-        ["data.csv", "UTF-8"],
+        ["data.csv", "UTF-8", "byte 0xb0 at byte position", 'encoding = "latin-1"'],
+    ),
+    (
+        "convert-csv-latin1-with-encoding",
+        ["convert", "proj/data.csv", "d.parquet", "--columns", "proj/lat.toml", "-q"],
+        _chain(
+            _edit("proj/data.csv", _with_extra_latin1),
+            _set("proj/lat.toml", '[data]\nencoding = "latin-1"\n'),
+        ),
+        0,
+        "d.parquet",
+        [],
+    ),
+    (
+        "convert-csv-utf16",
+        ["convert", "proj/data.csv", "d.parquet"],
+        _edit("proj/data.csv", lambda p: p.read_text().encode("utf-16")),
+        2,
+        None,
+        ["data.csv", "UTF-16"],
+    ),
+    (
+        "convert-csv-nul",
+        ["convert", "proj/data.csv", "d.parquet"],
+        _edit("proj/data.csv", lambda p: p.read_bytes().replace(b"\n", b"\n\x00", 1)),
+        2,
+        None,
+        ["data.csv", "NUL byte at byte position"],
+    ),
+    (
+        "convert-csv-bom",
+        ["convert", "proj/data.csv", "d.parquet", "-q"],
+        _edit("proj/data.csv", lambda p: b"\xef\xbb\xbf" + p.read_bytes()),
+        0,
+        "d.parquet",
+        [],
     ),
     (
         "convert-columns-latin1",
@@ -960,6 +995,14 @@ def _train_on_ratio_csv(root: Path):
 CASES += [
     ("run-ratio", RUN + ["--out", "o"], _train_on_ratio_csv, 2, None, ["ratio is 160", "--force"]),
     ("sweep-ratio", SWEEP + ["--out", "o"], _train_on_ratio_csv, 2, None, ["ratio is 160"]),
+    (
+        "run-ratio-force",  # the fit cannot be inverted: said once, as the error, with the cause
+        RUN + ["--out", "o", "--force"],
+        _train_on_ratio_csv,
+        2,
+        None,
+        ["cannot be inverted", "Likely cause (run with --force)", "ratio is 160"],
+    ),
 ]
 
 

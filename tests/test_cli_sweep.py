@@ -70,6 +70,39 @@ def test_knee_is_the_true_polynomial_order(tmp_path):
     assert rms[0] > 1.2 * rms[2] and abs(rms[5] - rms[2]) < 0.02 * rms[2]
     assert "| 3 |" in (out / "report.md").read_text()
     assert not (tmp_path / "out.partial").exists()
+    # which torque the members were scored against, as 'hdjax run' says it
+    desc = "reference: the torque the synthetic recordings were generated from (column)"
+    assert m["reference"] == {"kind": "column", "description": desc}
+    assert f"Torque {desc}." in (out / "report.md").read_text()
+
+
+def test_sweep_over_data_names_the_reference_column(tmp_path):
+    """Members built from files (a sweep over a [data] setting): the report and metrics name
+    the log column the torque came from; the resolved config finds the log from anywhere."""
+    import tomllib
+
+    from hdjax import save_csv
+
+    save_csv(synthetic_recording(JOINT, 800, seed=3), tmp_path / "log.csv")
+    text = (tmp_path / "log.csv").read_text().replace(",torque", ",tq", 1)
+    (tmp_path / "log.csv").write_text(text)
+    cfg = tmp_path / "files.toml"
+    cfg.write_text(
+        '[joint]\nratio = 160\nrated_torque = 400\n[data]\nkind = "files"\n'
+        'train = ["log.csv"]\nsplit = 0.3\n[data.columns]\ntorque = "tq"\n'
+        '[model]\nkinematic = "none"\npoly_order = 2\nper_segment = false\n'
+        "[outputs]\nfigures = false\n"
+    )
+    out = tmp_path / "split"
+    argv = ["sweep", str(cfg), "--setting", "data.split", "--values", "0.25,0.5"]
+    assert main(argv + ["--out", str(out), "-q"]) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    desc = "reference: the log column 'tq' ([data.columns] torque)"
+    assert m["reference"]["description"] == desc
+    assert [r["reference"]["description"] for r in m["members"]] == [desc, desc]
+    assert f"Torque {desc}." in (out / "report.md").read_text()
+    resolved = tomllib.loads((out / "config.resolved.toml").read_text())
+    assert resolved["data"]["train"] == [str(tmp_path.resolve() / "log.csv")]
 
 
 def test_interrupted_sweep_resumes(tmp_path, monkeypatch, capsys):

@@ -61,6 +61,11 @@ def reader(path):
     return importlib.import_module(f"{__name__}.{name}")
 
 
+def _text(mod, columns) -> dict:
+    """The keyword arguments of a text reader (CSV): the column map's `encoding`."""
+    return {"encoding": getattr(columns, "encoding", None)} if getattr(mod, "TEXT", False) else {}
+
+
 def _check_exists(path: Path) -> None:
     if not path.exists():
         raise DataError(f"{path}: no such file")
@@ -85,8 +90,9 @@ def load(path, columns=None, *, check_units: bool = True):
     path = Path(path)
     mod = reader(path)
     _check_exists(path)
-    names = needed_sources(columns, mod.column_names(path), str(path), mod)
-    table = mod.read_table(path, names)
+    kw = _text(mod, columns)
+    names = needed_sources(columns, mod.column_names(path, **kw), str(path), mod)
+    table = mod.read_table(path, names, **kw)
     return _build(table, columns, str(path), check_units)
 
 
@@ -105,10 +111,11 @@ def iter_recordings(path, columns=None, *, chunk: int, check_units: bool = True)
     path = Path(path)
     mod = reader(path)
     _check_exists(path)
-    available = mod.column_names(path)
+    kw = _text(mod, columns)
+    available = mod.column_names(path, **kw)
     names = needed_sources(columns, available, str(path), mod)
     mapper = ChunkMapper(columns, available if names is None else names, str(path), check_units)
-    for table in _at_least_two(mod.iter_tables(path, chunk, names)):
+    for table in _at_least_two(mod.iter_tables(path, chunk, names, **kw)):
         yield mapper(table)
     if mapper.n_rows == 0:
         raise DataError(f"{path}: the file has no data rows")

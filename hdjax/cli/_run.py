@@ -66,6 +66,8 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
     """Carry out an experiment into a [`hdjax.report.ResultDir`][]; returns a text summary."""
     import numpy as np
 
+    from .._errors import InversionError
+    from ..compliance import check_invertible
     from ..config import build_dataset, dumps_toml, save_model, with_absolute_paths
     from ..config._preflight import check_angles
     from ..pipelines import _paper as P
@@ -75,7 +77,7 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
     cfg = exp
     seed = cfg["experiment"]["seed"]
     ds = build_dataset(exp, progress)
-    check_angles(ds, force=force, warn=progress.warn)
+    forced = check_angles(ds, force=force)  # reported below, once the calibration is known
     joint = ds.joint
     rated = joint.rated_torque
     outputs = cfg["outputs"]
@@ -90,9 +92,16 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
     scale = P.current_scale(cfg, ds.train)
     model0 = P.build_model(cfg, joint, scale)
     t0 = time.perf_counter()
-    cal = P.calibrate(cfg, model0, ds.train, warn=progress.warn)
+    notes: list[str] = []
+    cal = P.calibrate(cfg, model0, ds.train, warn=notes.append)
     fit_s = time.perf_counter() - t0
-    for msg in cal.messages:
+    not_invertible = check_invertible(cal.model)
+    if not_invertible:  # one line: the estimate would fail on it, so say it once, as the error
+        cause = f" Likely cause (run with --force): {forced}" if forced else ""
+        raise InversionError(f"{not_invertible}{cause}")
+    if forced:
+        progress.warn(f"{forced} (--force: running anyway; the results may be wrong)")
+    for msg in notes + list(cal.messages):
         progress.warn(msg)
     progress("estimating torque with the model (eqs. 26-27)")
     est_m = P.estimate_model(cal.model, ds.test)

@@ -175,6 +175,7 @@ def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force)
     t_start = time.perf_counter()
     todo = [i for i in range(len(values)) if i not in cached]
     shared = {}
+    reference = None  # the reference torque of the data the members were scored against
     if todo:
         method = "network" if setting.startswith("network.") else "model"
         if setting.startswith("data."):
@@ -184,10 +185,13 @@ def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force)
                 ds = build_dataset(_with_path(cfgs[i], exp), progress)
                 check_angles(ds, force=force, warn=progress.warn)
                 results[i] = _member_loop(cfgs[i], ds, method, exp["experiment"]["seed"])
+                results[i]["reference"] = _reference_of(ds)
+                reference = reference or ds.reference
                 _save_member(rd, i, values[i], fp, results[i])
         else:
             ds = build_dataset(exp, progress)
             check_angles(ds, force=force, warn=progress.warn)
+            reference = ds.reference
             nested = (
                 setting in NESTED
                 and all(
@@ -199,11 +203,13 @@ def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force)
             if nested:
                 results, shared = _members_nested(exp, setting, values, todo, cfgs, ds, progress)
                 for i in todo:
+                    results[i]["reference"] = _reference_of(ds)
                     _save_member(rd, i, values[i], fp, results[i])
             else:
                 for i in todo:
                     progress(f"member {i + 1}/{len(values)}: {setting} = {values[i]!r}")
                     res = _member_loop(cfgs[i], ds, method, exp["experiment"]["seed"])
+                    res["reference"] = _reference_of(ds)
                     _save_member(rd, i, values[i], fp, res)
                     cached[i] = {"result": res}
                 results = {}
@@ -216,10 +222,13 @@ def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force)
     err = [r.get("rms", float("nan")) if r.get("rms") is not None else float("nan") for r in rows]
     secs = [r.get("fit_s", float("nan")) for r in rows]
     knee = find_knee([v if isinstance(v, int | float) else i for i, v in enumerate(values)], err)
+    described = [r.get("reference") or _reference_of_config(c) for r, c in zip(rows, cfgs)]
+    reference = reference or described[0]
     metrics = {
         "setting": setting,
         "values": values,
         "metric": "held-out torque RMS error over all test samples [N·m]",
+        "reference": reference,
         "members": [{"value": v, **r} for v, r in zip(values, rows)],
         "knee": None if knee is None else {"index": knee, "value": values[knee]},
         "shared": shared,
@@ -258,6 +267,13 @@ def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force)
         markdown_table(header, table),
         "",
     ]
+    kinds = {d["description"] for d in described}
+    if len(kinds) == 1:
+        lines += [f"Torque {reference['description']}.", ""]
+    else:  # a sweep over a data setting may change the reference between members
+        lines += ["Torque reference per member:", ""]
+        lines += [f"- `{json.dumps(v)}`: {d['description']}" for v, d in zip(values, described)]
+        lines += [""]
     if shared:
         lines += [
             f"Nested fit: one Gram pass of the largest model ({shared['gram_s']:.3f} s) shared by "
@@ -283,6 +299,23 @@ def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force)
         mark = "  <- knee" if knee is not None and values[knee] == v else ""
         text.append(f"{json.dumps(v):>24}  {f(r.get('rms')):>14}  {f(r.get('fit_s')):>8}{mark}")
     return "\n".join(text)
+
+
+def _reference_of(ds) -> dict:
+    """The kind and one-line description of a dataset's reference torque (for each member)."""
+    return {k: ds.reference[k] for k in ("kind", "description") if k in ds.reference}
+
+
+def _reference_of_config(cfg: dict) -> dict:
+    """The same, from the config alone (members cached by a sweep that did not record it)."""
+    from ..reference import describe_column_reference
+
+    kind = cfg["data"]["reference"]["kind"]
+    if kind == "column":
+        desc = describe_column_reference(cfg["data"]["columns"], cfg["data"]["kind"])
+    else:
+        desc = 'reference: built from a wrench ([data.reference] kind = "wrench")'
+    return {"kind": kind, "description": desc}
 
 
 def _with_path(cfg: dict, exp):

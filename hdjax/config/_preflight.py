@@ -136,21 +136,31 @@ def preflight(cfg: dict, *, base_dir=None, where: str = "config") -> None:
         check_memory(need, f"{where}: {what} with {n_coef} model terms", fix)
 
 
-def check_angles(ds, *, force: bool = False, warn=None) -> None:
+def check_angles(ds, *, force: bool = False, warn=None) -> str:
     """Refuse recordings whose motor-to-output angle ratio differs from the joint's by more
     than 5 % (another joint's data, or angles scaled differently): a model calibrated on them
-    would be wrong. With `force` each mismatch goes to `warn` instead.
+    would be wrong. With `force` the mismatches go, as one line, to `warn` instead.
+
+    **Returns:** the mismatch (`""` when every recording matches), for a caller that reports
+    it itself (`warn=None`).
 
     **Raises:** [`hdjax.ModelMismatchError`][] naming the recording, unless `force`.
     """
     from .._errors import ModelMismatchError
     from ._saved_model import ratio_mismatch
 
+    whys: dict = {}  # source -> why (a file split into calibration and test parts: once)
     for rec in list(ds.train) + list(ds.test.values()):
         why = ratio_mismatch(ds.joint.ratio, rec)
         if not why:
             continue
         if not force:
             raise ModelMismatchError(f"{why}; pass --force to run anyway")
-        if warn is not None:
-            warn(f"{why} (--force: running anyway; the results may be wrong)")
+        whys.setdefault(rec.source, why)
+    if not whys:
+        return ""
+    first = next(iter(whys.values()))
+    text = f"{first} (and {len(whys) - 1} more file(s))" if len(whys) > 1 else first
+    if warn is not None:
+        warn(f"{text} (--force: running anyway; the results may be wrong)")
+    return text
