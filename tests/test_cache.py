@@ -13,20 +13,23 @@ from hdjax.cli import _compilation_cache
 from tests.conftest import REPO
 
 # Runs one CLI command in a fresh process and prints the durations of JAX's backend-compile
-# events (a compilation, or on a cache hit the load of the compiled program) and how many
-# programs came from the persistent cache.
+# events (a compilation, or on a cache hit the load of the compiled program), how many programs
+# came from the persistent cache and how many were compiled afresh and written to it (misses).
+# The cache keeps every program (MIN_COMPILE_SECONDS = 0), so a miss is a fresh compilation.
 PROBE = """
 import json, sys
 import jax.monitoring as mon
-compiles, hits = [], []
+compiles, hits, misses = [], [], []
 COMPILE = "/jax/core/compile/backend_compile_duration"
 mon.register_event_duration_secs_listener(
     lambda e, d, **k: compiles.append(d) if e == COMPILE else 0)
 mon.register_event_listener(
     lambda e, **k: hits.append(1) if e == "/jax/compilation_cache/cache_hits" else 0)
+mon.register_event_listener(
+    lambda e, **k: misses.append(1) if e == "/jax/compilation_cache/cache_misses" else 0)
 from hdjax.cli import main
 code = main(sys.argv[1:])
-print(json.dumps({"code": code, "compiles": compiles, "hits": len(hits)}))
+print(json.dumps({"code": code, "compiles": compiles, "hits": len(hits), "misses": len(misses)}))
 """
 
 
@@ -50,8 +53,12 @@ def test_second_run_compiles_nothing_of_note(tmp_path):
     stored = list((tmp_path / "xdg" / "hdjax" / "jax").iterdir())
     assert stored, "the first run left nothing in the cache directory"
     second = probe(args(2), env)
+    assert first["misses"] > 0
     assert second["code"] == 0 and second["hits"] > 0
-    assert max(second["compiles"], default=0.0) <= 0.1, second["compiles"]
+    # Nothing is compiled afresh: every program is loaded from the cache. (The durations of
+    # those loads are wall time on a shared machine, so they are measured in
+    # benchmarks/bench_warm_start.py, not asserted here.)
+    assert second["misses"] == 0, second
     # --no-cache: nothing is read or written
     env["XDG_CACHE_HOME"] = str(tmp_path / "xdg-off")
     off = probe([*args(3), "--no-cache"], env)

@@ -66,6 +66,7 @@ def command(args, parser) -> int:
     from .._joint import load_joint
     from .._metrics import error_metrics
     from ..config import check_compatible, load_model
+    from ..config._preflight import check_read_memory
     from ..config._saved_model import angle_ratio_mismatch
     from ..report import check_output_file
     from ._common import Progress, read_column_map
@@ -84,6 +85,7 @@ def command(args, parser) -> int:
                 "'hdjax run' (with [outputs] save_model = true)"
             )
         model_path = model_path / "model.json"
+    check_read_memory([args.data], fix="split the log into shorter files and estimate each")
     saved = load_model(model_path)
     cmap = read_column_map(args.columns) if args.columns else None
     joint = load_joint(args.joint) if args.joint else None

@@ -65,6 +65,29 @@ def check_memory(n_bytes: float, what: str, fix: str, *, free: int | None = None
         )
 
 
+def check_read_memory(paths, *, fix: str, free: int | None = None) -> None:
+    """Refuse, in one line, to read logs whose estimated in-memory size (a CSV's text and
+    cells, the recording and its signals) exceeds the free memory, before any is read.
+
+    **Arguments:**
+
+    - `paths`: the files to be read whole (missing ones are left to the reader's message).
+    - `fix`: what to do instead.
+    - `free`: the free memory in bytes (default `available_memory`).
+    """
+    files = [Path(p) for p in paths if p is not None]
+    sizes = [_stat(p) for p in files]
+    need = 0.0
+    for p, size in zip(files, sizes):
+        text = p.suffix.lower() == ".csv"
+        # about 60 bytes per CSV row; a binary log at least 40 (5 float64 columns)
+        per_row = 60.0 if text else 40.0
+        need += size * (_CSV_FACTOR if text else 1) + size / per_row * _BYTES_PER_SAMPLE
+    if need:
+        names = ", ".join(str(p) for p, n in zip(files, sizes) if n)
+        check_memory(need, f"reading {names} ({_size(sum(sizes))})", fix, free=free)
+
+
 def _n_coef(cfg: dict, where: str) -> int:
     """The number of model terms of a `[model]` table (the model is built to count them)."""
     from ..compliance import ComplianceModel

@@ -113,6 +113,9 @@ def run(args: argparse.Namespace) -> int:
     inputs = [args.train, args.test, args.joint, args.config]
     if args.config is not None:
         inputs += _config_inputs(args.config)
+    from ..config._preflight import check_read_memory
+
+    check_read_memory(inputs[:2] + inputs[4:], fix="give shorter --train and --test logs")
     with ResultDir(out, overwrite=args.overwrite, inputs=inputs, command="discover") as rd:
         return _run_into(rd, args)
 

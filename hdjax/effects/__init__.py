@@ -24,6 +24,7 @@ from ._base import (
     AbstractMemorylessTerm as AbstractMemorylessTerm,
     AbstractPathTerm as AbstractPathTerm,
     AbstractPlantEffect as AbstractPlantEffect,
+    AbstractSignalTerm as AbstractSignalTerm,
     AbstractTerm as AbstractTerm,
     AbstractTorqueFreeTerm as AbstractTorqueFreeTerm,
     Candidate as Candidate,

@@ -145,6 +145,27 @@ class AbstractTorqueFreeTerm(AbstractTerm):
     torque_kind: ClassVar[str] = "none"
 
 
+class AbstractSignalTerm(AbstractTorqueFreeTerm):
+    """A one-column, torque-free term that is a function of one named signal, written once for
+    both array libraries: subclasses implement `transform(x, xp)` with `xp` either `jax.numpy`
+    or `numpy`, and `signal_name` (the signal it reads)."""
+
+    @property
+    @abc.abstractmethod
+    def signal_name(self) -> str:
+        """The signal (or extra column) the term reads."""
+
+    @abc.abstractmethod
+    def transform(self, x, xp):
+        """The column as a function of the signal `x`, with array namespace `xp`."""
+
+    def columns(self, sig, torque=None):
+        return self.transform(sig.get(self.signal_name), jnp)[:, None]
+
+    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+        return self.transform(np.asarray(sig.get(self.signal_name)), np)[:, None]
+
+
 class AbstractLinearTorqueTerm(AbstractTerm):
     r"""A term linear in torque, $\psi = u(x) T$ (`torque_kind = "linear"`), inverted in closed
     form. Subclasses implement `torque_slope(sig)` $= u(x)$ and its NumPy twin."""

@@ -26,7 +26,7 @@ from .._custom_types import Array, Float
 from ._base import (
     AbstractFamily,
     AbstractFriction,
-    AbstractTorqueFreeTerm,
+    AbstractSignalTerm,
     Candidate,
     PlantEffect,
     check_positive,
@@ -36,7 +36,7 @@ from ._base import (
 )
 
 
-class Coulomb(AbstractTorqueFreeTerm):
+class Coulomb(AbstractSignalTerm):
     """Coulomb-like friction signature, a smooth sign $\\tanh(\\omega/\\omega_s)$ of a velocity."""
 
     signal: str = eqx.field(default="omega_m", static=True)
@@ -52,11 +52,12 @@ class Coulomb(AbstractTorqueFreeTerm):
     def names(self) -> tuple[str, ...]:
         return (f"tanh({self.signal}/{fmt(self.omega_s)})",)
 
-    def columns(self, sig, torque=None):
-        return jnp.tanh(sig.get(self.signal) / self.omega_s)[:, None]
+    @property
+    def signal_name(self) -> str:
+        return self.signal
 
-    def numpy_columns(self, sig, torque=None) -> np.ndarray:
-        return np.tanh(np.asarray(sig.get(self.signal)) / self.omega_s)[:, None]
+    def transform(self, x, xp):
+        return xp.tanh(x / self.omega_s)
 
 
 class CoulombFriction(AbstractFriction):

@@ -25,7 +25,7 @@ from ._base import (
     AbstractFamily,
     AbstractLinearTorqueTerm,
     AbstractPlantEffect,
-    AbstractTorqueFreeTerm,
+    AbstractSignalTerm,
     Candidate,
     PlantEffect,
     check_positive,
@@ -35,7 +35,7 @@ from ._base import (
 )
 
 
-class Column(AbstractTorqueFreeTerm):
+class Column(AbstractSignalTerm):
     """An extra recording column (e.g. `temperature`), centred and scaled: a twist drift."""
 
     name: str = eqx.field(static=True)
@@ -52,15 +52,12 @@ class Column(AbstractTorqueFreeTerm):
     def names(self) -> tuple[str, ...]:
         return (f"({self.name}-{fmt(self.center)})/{fmt(self.scale)}",)
 
-    def columns(self, sig, torque=None):
-        return ((sig.get(self.name) - self.center) / self.scale)[:, None]
+    @property
+    def signal_name(self) -> str:
+        return self.name
 
-    def numpy_columns(self, sig, torque=None) -> np.ndarray:
-        return ((np.asarray(sig.get(self.name)) - self.center) / self.scale)[:, None]
-
-    def slope(self, sig):
-        """$u(x)$ such that the column is $u(x)$ (no torque dependence)."""
-        return (sig.get(self.name) - self.center) / self.scale
+    def transform(self, x, xp):
+        return (x - self.center) / self.scale
 
 
 class ColumnTimesTorque(AbstractLinearTorqueTerm):

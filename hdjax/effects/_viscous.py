@@ -14,13 +14,12 @@ from __future__ import annotations
 from typing import ClassVar
 
 import equinox as eqx
-import numpy as np
 
 from .._custom_types import Array, Float
 from ._base import (
     AbstractFamily,
     AbstractFriction,
-    AbstractTorqueFreeTerm,
+    AbstractSignalTerm,
     Candidate,
     PlantEffect,
     check_positive,
@@ -31,7 +30,7 @@ from ._base import (
 from ._coulomb import velocity_rms
 
 
-class Viscous(AbstractTorqueFreeTerm):
+class Viscous(AbstractSignalTerm):
     """Viscous friction signature: a velocity, divided by `scale`."""
 
     signal: str = eqx.field(default="omega_m", static=True)
@@ -47,11 +46,12 @@ class Viscous(AbstractTorqueFreeTerm):
     def names(self) -> tuple[str, ...]:
         return (f"{self.signal}/{fmt(self.scale)}",)
 
-    def columns(self, sig, torque=None):
-        return (sig.get(self.signal) / self.scale)[:, None]
+    @property
+    def signal_name(self) -> str:
+        return self.signal
 
-    def numpy_columns(self, sig, torque=None) -> np.ndarray:
-        return (np.asarray(sig.get(self.signal)) / self.scale)[:, None]
+    def transform(self, x, xp):
+        return x / self.scale
 
 
 class ViscousFriction(AbstractFriction):
