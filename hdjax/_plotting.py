@@ -7,6 +7,8 @@ non-interactive Agg backend (figures are written to files, never shown).
 
 from __future__ import annotations
 
+import io
+
 from ._errors import ConfigError
 
 
@@ -30,3 +32,11 @@ def save_figure(fig, path, *, dpi: int = 110) -> None:
     """Write `fig` to `path` and close it."""
     fig.savefig(path, dpi=dpi)
     pyplot().close(fig)
+
+
+def png_bytes(fig, *, dpi: int = 110) -> bytes:
+    """`fig` as PNG bytes (for an atomic write into a result folder), and close it."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    pyplot().close(fig)
+    return buf.getvalue()

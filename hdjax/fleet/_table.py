@@ -7,6 +7,8 @@ import datetime as dt
 import numpy as np
 
 from .._formats import require
+from .._io import atomic_write_bytes
+from .._plotting import png_bytes, pyplot
 
 FIXED = (
     ("task_id", "string"),
@@ -75,8 +77,6 @@ def table_bytes(rows: list[dict]) -> bytes:
 def write_table(rows: list[dict], path) -> None:
     """Write the rows as one Parquet table, atomically: the fixed columns, then one
     `coef:NAME` column per coefficient any row has (null where a joint's model lacks it)."""
-    from .._io import atomic_write_bytes
-
     atomic_write_bytes(path, table_bytes(rows))
 
 
@@ -91,13 +91,11 @@ def drift_figure(joint: str, rows: list[dict]) -> bytes:
     """How one joint's calibration moves over its logs' dates: the stiffness of each torque
     segment ($1/k_j$, Song et al. eq. (7)), the amplitude of each effect the residual loop
     added (with its interval when given), and the errors. Failed tasks are left out."""
-    from ..report._figures import _plt, _png
-
     ok = sorted(
         (r for r in rows if r.get("status") == "ok" and _date(r["date"])),
         key=lambda r: r["date"],
     )
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(7.5, 8.0), sharex=True)
     dates = [_date(r["date"]) for r in ok]
     k_names = sorted(
@@ -139,4 +137,4 @@ def drift_figure(joint: str, rows: list[dict]) -> bytes:
     note = f" ({n_failed} failed task(s) left out)" if n_failed else ""
     fig.suptitle(f"drift of joint {joint}{note}")
     fig.autofmt_xdate()
-    return _png(fig)
+    return png_bytes(fig)

@@ -13,13 +13,28 @@ import warnings
 
 import numpy as np
 
+from .._cache import enable_compilation_cache
+from .._errors import HdjaxError
+from .._io import ColumnMap, load_recording
+from .._joint import Joint
+from .._metrics import error_metrics
+from ..compliance import (
+    ComplianceModel,
+    RecordingStream,
+    calibrate_lstsq,
+    calibrate_stream,
+    estimate_torque,
+    signals_from_recording,
+)
+from ..compliance._stream_fit import peak_abs
+from ..config import check_compatible, load_model
+from ..discover import DiscoverOptions, discover
+
 ARCSEC = 648000.0 / np.pi
 _CACHE_SET: list = []
 
 
 def _one_line(err: BaseException) -> str:
-    from .._errors import HdjaxError
-
     text = " ".join(str(err).split())
     return text if isinstance(err, HdjaxError) else f"{type(err).__name__}: {text}"
 
@@ -39,8 +54,6 @@ def run_task(spec: dict, cache_dir: str | None = None) -> dict:
     when the residual loop gives one) and the TEST torque errors before and after.
     """
     if cache_dir and not _CACHE_SET:
-        from .._cache import enable_compilation_cache
-
         enable_compilation_cache(cache_dir)
         _CACHE_SET.append(cache_dir)
     t0 = time.perf_counter()
@@ -65,9 +78,6 @@ def run_task(spec: dict, cache_dir: str | None = None) -> dict:
 
 
 def _joint_and_map(spec):
-    from .._io import ColumnMap
-    from .._joint import Joint
-
     joint = Joint.from_dict(spec["joint"])
     cmap = ColumnMap.from_dict(spec["columns"]) if spec["columns"] else None
     return joint, cmap
@@ -79,8 +89,6 @@ def _coefficients(model) -> dict:
 
 
 def _structure(spec, joint, scale):
-    from ..compliance import ComplianceModel
-
     m = spec["model_structure"]
     return ComplianceModel.paper(
         joint,
@@ -94,10 +102,6 @@ def _structure(spec, joint, scale):
 
 
 def _calibrate(spec) -> dict:
-    from .._io import load_recording
-    from ..compliance import RecordingStream, calibrate_lstsq, calibrate_stream
-    from ..compliance._stream_fit import peak_abs
-
     joint, cmap = _joint_and_map(spec)
     chunk = spec["settings"]["chunk"]
     if chunk:
@@ -118,7 +122,6 @@ def _calibrate(spec) -> dict:
 
 def _effect_amplitudes(result, train) -> list[dict]:
     """Each added effect's twist contribution on TRAIN (RMS, arcsec), from the final model."""
-    from ..compliance import signals_from_recording
 
     model = result.final_model
     sig = signals_from_recording(train, model.ratio, model.twist_sign, velocity=model.velocity)
@@ -147,10 +150,6 @@ def _effect_amplitudes(result, train) -> list[dict]:
 
 
 def _calibrate_discover(spec) -> dict:
-    from .._io import load_recording
-    from .._joint import Joint
-    from ..discover import DiscoverOptions, discover
-
     joint = Joint.from_dict(spec["joint"])
     _, cmap = _joint_and_map(spec)
     rec = load_recording(spec["log"], cmap)
@@ -179,11 +178,6 @@ def _calibrate_discover(spec) -> dict:
 
 
 def _estimate(spec) -> dict:
-    from .._io import load_recording
-    from .._metrics import error_metrics
-    from ..compliance import estimate_torque
-    from ..config import check_compatible, load_model
-
     joint, cmap = _joint_and_map(spec)
     saved = load_model(spec["model_file"])
     if saved.compliance is None:

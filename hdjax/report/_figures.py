@@ -6,11 +6,9 @@ matplotlib is imported lazily (Agg backend), so `import hdjax` stays light.
 
 from __future__ import annotations
 
-import io
-
 import numpy as np
 
-from .._plotting import pyplot
+from .._plotting import png_bytes, pyplot
 
 _METHOD_LABEL = {"model": "model-based (eqs. 7-10, 26-27)", "network": "BP network (eqs. 36-46)"}
 
@@ -18,11 +16,7 @@ _METHOD_LABEL = {"model": "model-based (eqs. 7-10, 26-27)", "network": "BP netwo
 _plt = pyplot
 
 
-def _png(fig) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    _plt().close(fig)
-    return buf.getvalue()
+_png = png_bytes
 
 
 def _envelope(err: np.ndarray, limit: int = 6000) -> np.ndarray:

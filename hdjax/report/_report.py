@@ -19,7 +19,13 @@ import platform
 import shutil
 from pathlib import Path
 
+import jax
+
+# `_io.atomic_write_bytes` is looked up at each call, so that a test can stand a full disk in
+from .. import __version__, _io
 from .._errors import ConfigError
+from .._interrupts import check, critical
+from ._outputs import MARKER, check_not_input, check_output_dir, marker_bytes, read_marker
 
 
 def _clean(obj):
@@ -46,9 +52,6 @@ def json_bytes(obj) -> bytes:
 
 def environment(seed: int | None = None) -> dict:
     """Version, seed and machine facts recorded with every result."""
-    import jax
-
-    from .. import __version__
 
     return {
         "hdjax_version": __version__,
@@ -95,7 +98,6 @@ class ResultDir:
         keep_staging_on_error=False,
         command: str = "hdjax",
     ):
-        from ._outputs import MARKER, check_not_input, check_output_dir, marker_bytes, read_marker
 
         self.out = Path(out)
         self.inputs = tuple(p for p in inputs if p is not None)
@@ -121,9 +123,9 @@ class ResultDir:
         try:
             self.staging.mkdir(parents=True, exist_ok=True)
             if not (self.staging / MARKER).exists():
-                from .._io import atomic_write_bytes
-
-                atomic_write_bytes(self.staging / MARKER, marker_bytes(command, [], staging=True))
+                _io.atomic_write_bytes(
+                    self.staging / MARKER, marker_bytes(command, [], staging=True)
+                )
         except OSError as err:
             raise ConfigError(
                 f"{self.out}: cannot create the result folder there "
@@ -138,11 +140,8 @@ class ResultDir:
         return p
 
     def write_bytes(self, rel: str, data: bytes) -> None:
-        from .._interrupts import check
-        from .._io import atomic_write_bytes
-
         check()
-        atomic_write_bytes(self.path(rel), data)
+        _io.atomic_write_bytes(self.path(rel), data)
         if rel not in self.files:
             self.files.append(rel)
 
@@ -164,10 +163,6 @@ class ResultDir:
 
     def commit(self) -> Path:
         """Move the finished result into place (replacing the old one under `overwrite`)."""
-        from .._interrupts import check, critical
-        from .._io import atomic_write_bytes
-        from ._outputs import check_output_dir, marker_bytes
-
         check()
         # the folder may have changed while the command ran: apply the rules again
         state = check_output_dir(self.out, inputs=self.inputs, overwrite=self.overwrite)
@@ -175,7 +170,7 @@ class ResultDir:
         for root, _dirs, names in os.walk(self.staging):
             files += [Path(root, n).relative_to(self.staging).as_posix() for n in names]
         files = [f for f in files if f != self._marker]
-        atomic_write_bytes(self.staging / self._marker, marker_bytes(self.command, files))
+        _io.atomic_write_bytes(self.staging / self._marker, marker_bytes(self.command, files))
         with critical():
             old = None
             if state == "result":
