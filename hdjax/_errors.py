@@ -51,14 +51,15 @@ def did_you_mean(name: str, options) -> str:
     return f" (did you mean {close[0]!r}?)" if close else ""
 
 
-def check_keys(table, known, where: str, *, inside: str = "") -> None:
+def check_keys(table, known, where: str = "", *, inside: str = "", noun: str = "key") -> None:
     """Raise `ConfigError` for the first key of `table` not in `known`, with a "did you mean"
     hint and the known keys: `"{where}: unknown key 'x'{inside} (did you mean 'y'?); known keys:
-    ..."`."""
+    ..."` (`noun` renames "key", e.g. "plant parameter"; an empty `where` drops the prefix)."""
     known = list(known)
+    prefix = f"{where}: " if where else ""
     for key in table:
         if key not in known:
             raise ConfigError(
-                f"{where}: unknown key {key!r}{inside}{did_you_mean(str(key), known)}; known "
-                f"keys: {', '.join(map(str, known))}"
+                f"{prefix}unknown {noun} {key!r}{inside}{did_you_mean(str(key), known)}; known "
+                f"{noun}s: {', '.join(map(str, known))}"
             )

@@ -8,13 +8,8 @@ import numpy as np
 import pytest
 
 import hdjax
-from hdjax.strain import (
-    DeformationSensor,
-    StrainGaugeSensor,
-    compare_feedback,
-    quantise,
-    reproduce_figures,
-)
+from hdjax.pipelines import compare_feedback, reproduce_figures
+from hdjax.strain import DeformationSensor, StrainGaugeSensor, quantise
 
 
 @pytest.fixture(scope="session")

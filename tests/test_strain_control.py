@@ -9,6 +9,13 @@ import scipy.linalg
 import scipy.signal
 
 import hdjax
+from hdjax.pipelines import (
+    open_loop_error_friction,
+    paper_joint,
+    sine_tracking,
+    static_characteristic,
+    step_response,
+)
 from hdjax.strain import (
     IdealJoint,
     IdealTorqueSensor,
@@ -17,15 +24,10 @@ from hdjax.strain import (
     TorqueController,
     hashimoto_controller,
     loop_poles,
-    open_loop_error_friction,
-    paper_joint,
     simulate_torque_control,
     sine_reference,
-    sine_tracking,
-    static_characteristic,
     steady_state_error,
     step_reference,
-    step_response,
     strain_per_torque,
 )
 

@@ -35,7 +35,7 @@ import hashlib
 import json
 from pathlib import Path
 
-from .._errors import ConfigError, did_you_mean
+from .._errors import ConfigError, check_keys, did_you_mean
 from .._io import ColumnMap, read_toml
 from .._joint import Joint
 
@@ -81,17 +81,8 @@ class Manifest:
     tasks: list[Task]
 
 
-def _check_keys(table: dict, known, where: str) -> None:
-    for key in table:
-        if key not in known:
-            raise ConfigError(
-                f"{where}: unknown key {key!r}{did_you_mean(key, known)}; known keys: "
-                f"{', '.join(known)}"
-            )
-
-
 def _merged(defaults: dict, given: dict, where: str) -> dict:
-    _check_keys(given, defaults, where)
+    check_keys(given, defaults, where)
     out = dict(defaults)
     for key, value in given.items():
         want = type(defaults[key])
@@ -134,7 +125,7 @@ def load_manifest(path) -> Manifest:
     """
     path = Path(path)
     doc = read_toml(path)
-    _check_keys(doc, ("fleet", "model", "joints"), str(path))
+    check_keys(doc, ("fleet", "model", "joints"), str(path))
     settings = _merged(FLEET_KEYS, doc.get("fleet", {}), f"{path} [fleet]")
     if settings["task"] not in TASKS:
         raise ConfigError(
@@ -176,7 +167,7 @@ def load_manifest(path) -> Manifest:
             lw = f"{where} logs[{k}]"
             if not isinstance(log, dict):
                 raise ConfigError(f"{lw}: expected {{ path = ..., date = ... }}, got {log!r}")
-            _check_keys(log, ("path", "date"), lw)
+            check_keys(log, ("path", "date"), lw)
             if not isinstance(log.get("path"), str):
                 raise ConfigError(f"{lw}: missing path (the log file)")
             date = log.get("date")

@@ -9,6 +9,11 @@ and tabulate.
 - [`hdjax.pipelines.compare_methods`][]: every calibration method on the plant's four
   scenarios, as a loop over estimators ([`hdjax.pipelines.FITTERS`][]).
 - [`hdjax.pipelines.periodic_features_effect`][]: how much the periodic angle features help.
+- Hashimoto et al. 1993, Figs. 15-17: [`hdjax.pipelines.static_characteristic`][],
+  [`hdjax.pipelines.step_response`][], [`hdjax.pipelines.sine_tracking`][] on
+  [`hdjax.pipelines.paper_joint`][]; the strain-gauge / deformation feedback comparison
+  [`hdjax.pipelines.compare_feedback`][]; everything at once with its figures:
+  [`hdjax.pipelines.reproduce_figures`][].
 """
 
 from ._compare import (
@@ -22,3 +27,20 @@ from ._periodic import (
     format_periodic_table as format_periodic_table,
     periodic_features_effect as periodic_features_effect,
 )
+from ._strain_compare import (
+    CaseResult as CaseResult,
+    Comparison as Comparison,
+    compare_feedback as compare_feedback,
+)
+from ._strain_experiments import (
+    FRICTION_PAPER as FRICTION_PAPER,
+    SineResult as SineResult,
+    StaticResult as StaticResult,
+    StepResponse as StepResponse,
+    open_loop_error_friction as open_loop_error_friction,
+    paper_joint as paper_joint,
+    sine_tracking as sine_tracking,
+    static_characteristic as static_characteristic,
+    step_response as step_response,
+)
+from ._strain_figures import reproduce_figures as reproduce_figures

@@ -16,7 +16,7 @@ import numpy as np
 
 from .. import effects as _effects_registry
 from .._custom_types import Array, Float
-from .._errors import ConfigError, did_you_mean
+from .._errors import ConfigError, check_keys, did_you_mean
 from ._effects import _concrete, check_effect_name, make_effect
 
 _f64 = lambda x: jnp.asarray(x, jnp.float64)
@@ -302,9 +302,4 @@ def hashimoto_params(effects: Mapping | None = None, **kwargs) -> PlantParams:
 
 def _check_overrides(kwargs, base):
     allowed = tuple(base) + ("corner", "flexspline", "newton_iterations")
-    for key in kwargs:
-        if key not in allowed:
-            raise ConfigError(
-                f"unknown plant parameter {key!r}{did_you_mean(key, allowed)}; known: "
-                f"{', '.join(allowed)}"
-            )
+    check_keys(kwargs, allowed, noun="plant parameter")

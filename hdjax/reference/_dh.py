@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, Float
-from .._errors import ConfigError, did_you_mean
+from .._errors import ConfigError, check_keys, did_you_mean
 from .._io import read_toml
 
 CONVENTIONS = ("standard", "modified")
@@ -161,9 +161,7 @@ def _angles(values, unit: str) -> list[float]:
 
 def dh_arm_from_table(table: Mapping, *, where: str = "[arm]") -> DHArm:
     """Build from a TOML-like `[arm]` table (see [`hdjax.reference.load_dh_table`][])."""
-    for key in table:
-        if key not in _TABLE_KEYS:
-            raise ConfigError(f"{where}: unknown key {key!r}{did_you_mean(key, _TABLE_KEYS)}")
+    check_keys(table, _TABLE_KEYS, where)
     convention = table.get("convention", "standard")
     if convention not in CONVENTIONS:
         raise ConfigError(
@@ -192,11 +190,7 @@ def dh_arm_from_table(table: Mapping, *, where: str = "[arm]") -> DHArm:
     tool = table.get("tool", {})
     if not isinstance(tool, Mapping):
         raise ConfigError(f"{where} tool must be a table {{ xyz = [..], rpy = [..] }}")
-    for key in tool:
-        if key not in ("xyz", "rpy"):
-            raise ConfigError(
-                f"{where} tool: unknown key {key!r}{did_you_mean(key, ['xyz', 'rpy'])}"
-            )
+    check_keys(tool, ("xyz", "rpy"), f"{where} tool")
     vecs = {}
     for key in ("xyz", "rpy"):
         v = tool.get(key, [0.0, 0.0, 0.0])

@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
-from .._errors import ConfigError, did_you_mean
+from .._errors import ConfigError, check_keys, did_you_mean
 
 KINDS = ("column", "wrench")
 OFFSETS = ("none", "rest", "fit")
@@ -91,9 +91,7 @@ def check_reference(key: str, v) -> dict:
                 "keys; the column is [data.columns] torque)"
             )
         return {"kind": "column"}
-    for k in v:
-        if k not in _WRENCH_KEYS:
-            raise ConfigError(f"{key}: unknown key {k!r}{did_you_mean(k, _WRENCH_KEYS)}")
+    check_keys(v, _WRENCH_KEYS, key)
     out: dict = {"kind": "wrench"}
     for req in ("joint", "angles", "wrench", "model_torque"):
         if req not in v:

@@ -14,21 +14,17 @@ control of a harmonic-drive joint.
   [`hdjax.strain.steady_state_error`][] (eq. (20)), [`hdjax.strain.loop_poles`][],
   [`hdjax.strain.check_loop`][], [`hdjax.strain.simulate_torque_control`][] on
   [`hdjax.strain.PlantJoint`][] (`hdjax.plant`) or [`hdjax.strain.IdealJoint`][].
-- The paper's experiments (Figs. 15-17): [`hdjax.strain.static_characteristic`][],
-  [`hdjax.strain.step_response`][], [`hdjax.strain.sine_tracking`][]; the comparison
-  [`hdjax.strain.compare_feedback`][]; everything at once:
-  [`hdjax.strain.reproduce_figures`][].
+- The paper's experiments (Figs. 15-17) live in `hdjax.pipelines`, above this package:
+  [`hdjax.pipelines.static_characteristic`][],
+  [`hdjax.pipelines.step_response`][], [`hdjax.pipelines.sine_tracking`][]; the comparison
+  [`hdjax.pipelines.compare_feedback`][]; everything at once:
+  [`hdjax.pipelines.reproduce_figures`][].
 """
 
 from ._bridge_sensor import (
     AbstractTorqueSensor as AbstractTorqueSensor,
     IdealTorqueSensor as IdealTorqueSensor,
     StrainGaugeSensor as StrainGaugeSensor,
-)
-from ._compare import (
-    CaseResult as CaseResult,
-    Comparison as Comparison,
-    compare_feedback as compare_feedback,
 )
 from ._control import (
     KD_PAPER as KD_PAPER,
@@ -42,18 +38,6 @@ from ._control import (
     steady_state_error as steady_state_error,
 )
 from ._deformation import DeformationSensor as DeformationSensor, quantise as quantise
-from ._experiments import (
-    FRICTION_PAPER as FRICTION_PAPER,
-    SineResult as SineResult,
-    StaticResult as StaticResult,
-    StepResponse as StepResponse,
-    open_loop_error_friction as open_loop_error_friction,
-    paper_joint as paper_joint,
-    sine_tracking as sine_tracking,
-    static_characteristic as static_characteristic,
-    step_response as step_response,
-)
-from ._figures import reproduce_figures as reproduce_figures
 from ._gauges import (
     EPS_RATED_PAPER as EPS_RATED_PAPER,
     PSI0_PAPER as PSI0_PAPER,
@@ -85,3 +69,30 @@ from ._stability import (
     check_loop as check_loop,
     loop_poles as loop_poles,
 )
+
+# The experiments and the figure reproduction moved to `hdjax.pipelines` (they put the sensor, the
+# controller and the plant together); the old `hdjax.strain.X` names still resolve, on access
+# only, so that importing this package does not import the pipelines above it.
+_MOVED_TO_PIPELINES = (
+    "FRICTION_PAPER",
+    "CaseResult",
+    "Comparison",
+    "SineResult",
+    "StaticResult",
+    "StepResponse",
+    "compare_feedback",
+    "open_loop_error_friction",
+    "paper_joint",
+    "reproduce_figures",
+    "sine_tracking",
+    "static_characteristic",
+    "step_response",
+)
+
+
+def __getattr__(name: str):
+    if name in _MOVED_TO_PIPELINES:
+        from .. import pipelines  # above this package: imported on access, not at import time
+
+        return getattr(pipelines, name)
+    raise AttributeError(f"module 'hdjax.strain' has no attribute {name!r}")

@@ -5,7 +5,7 @@ $$\hat T = K\left(\frac{\hat q_M}{N} - \hat q_L\right),$$
 eq. (17) read backwards, with $\hat q$ the encoder angles rounded to whole counts. This is the
 linear-stiffness version of the deformation-based estimate of Song et al. (2019), who replace
 $K$ by a calibrated nonlinear compliance with hysteresis; it is the competitor of the flexspline
-bridge in [`hdjax.strain.compare_feedback`][].
+bridge in [`hdjax.pipelines.compare_feedback`][].
 """
 
 from __future__ import annotations

@@ -21,11 +21,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..plant import zero_state
-from ._bridge_sensor import AbstractTorqueSensor, IdealTorqueSensor, StrainGaugeSensor
-from ._control import hashimoto_controller
-from ._deformation import DeformationSensor
-from ._experiments import SMOOTHING_STICK, paper_joint
-from ._simulate import ControlRun, simulate_torque_control, sine_reference
+from ..strain import (
+    AbstractTorqueSensor,
+    ControlRun,
+    DeformationSensor,
+    IdealTorqueSensor,
+    StrainGaugeSensor,
+    hashimoto_controller,
+    simulate_torque_control,
+    sine_reference,
+)
+from ._strain_experiments import SMOOTHING_STICK, paper_joint
 
 DALPHA_DEG = (0.0, 0.5, 1.0, 2.0, 5.0)
 
@@ -120,7 +126,7 @@ def compare_feedback(
     - `t_skip`: start-up left out of the metrics [s].
     - `smoothing`: smooth-sign width of the motor's Coulomb friction [rad/s].
 
-    **Returns:** a [`hdjax.strain.Comparison`][].
+    **Returns:** a [`hdjax.pipelines.Comparison`][].
     """
     joint = paper_joint(
         constrained=False,

@@ -1,6 +1,6 @@
 r"""Figures and numbers of the Hashimoto et al. (1993) reproduction, written into one folder.
 
-[`hdjax.strain.reproduce_figures`][] runs the sensor model (eqs. (8), (13)), the three
+[`hdjax.pipelines.reproduce_figures`][] runs the sensor model (eqs. (8), (13)), the three
 torque-control experiments (Figs. 15-17, eq. (20)) on the constrained and the free link, and the
 strain-gauge / deformation comparison, writes one PNG per figure and `strain_metrics.json`,
 `strain_comparison.md`, and returns the numbers. Matplotlib is imported here only, with the Agg
@@ -18,10 +18,18 @@ import numpy as np
 from .._errors import ConfigError
 from .._io import atomic_write_bytes
 from .._plotting import pyplot
-from ._bridge_sensor import StrainGaugeSensor
-from ._compare import compare_feedback
-from ._control import RATED_TORQUE_PAPER, hashimoto_controller, steady_state_error
-from ._experiments import (
+from ..strain import (
+    RATED_TORQUE_PAPER,
+    FlexsplineGeometry,
+    StrainGaugeSensor,
+    hashimoto_controller,
+    loop_poles,
+    misalignment_error_index,
+    resolved_torque_gain,
+    steady_state_error,
+)
+from ._strain_compare import compare_feedback
+from ._strain_experiments import (
     FRICTION_PAPER,
     SMOOTHING_STICK,
     open_loop_error_friction,
@@ -30,8 +38,6 @@ from ._experiments import (
     static_characteristic,
     step_response,
 )
-from ._gauges import FlexsplineGeometry, misalignment_error_index, resolved_torque_gain
-from ._stability import loop_poles
 
 _pyplot = pyplot
 

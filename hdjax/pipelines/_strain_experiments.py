@@ -23,11 +23,14 @@ import numpy as np
 
 from .._errors import ConfigError
 from ..plant import hashimoto_params, with_effects
-from ._bridge_sensor import AbstractTorqueSensor, IdealTorqueSensor
-from ._control import RATED_TORQUE_PAPER, TorqueController, hashimoto_controller
-from ._plant_joint import PlantJoint
-from ._simulate import (
+from ..strain import (
+    RATED_TORQUE_PAPER,
+    AbstractTorqueSensor,
     ControlRun,
+    IdealTorqueSensor,
+    PlantJoint,
+    TorqueController,
+    hashimoto_controller,
     simulate_torque_control,
     sine_reference,
     step_reference,
