@@ -54,7 +54,7 @@ def fold_basis(
     """QR of the base design on each fold's training part, and the base held-out error.
 
     `tests` (optional) gives the held-out index sets directly (whole contiguous blocks, see
-    [`hdjax.discover._folds`][]); otherwise interleaved blocks of `block` samples.
+    `hdjax.discover._folds`); otherwise interleaved blocks of `block` samples.
     """
     a = _scaled(a)
     n = a.shape[0]
