@@ -14,7 +14,12 @@ import os
 import sys
 import warnings
 
+from .. import __version__
+from .._cache import disable_compilation_cache, enable_compilation_cache
 from .._errors import HdjaxError, did_you_mean
+from .._interrupts import Interrupted, handling, pending
+from ..discover import _cli as _discover
+from . import _bench, _convert, _estimate, _fleet, _run, _sweep
 from ._common import Parser, ParserExit, UsageError
 
 COMMANDS = ("run", "sweep", "estimate", "discover", "bench", "convert", "fleet")
@@ -32,9 +37,6 @@ example:
 
 
 def _parser() -> Parser:
-    from ..discover import _cli as _discover
-    from . import _bench, _estimate, _run, _sweep
-
     p = Parser(prog="hdjax", description=DESCRIPTION, epilog=EXAMPLE)
     p.add_argument("--version", action="store_true", help="print the version and exit")
     p.add_argument(
@@ -48,17 +50,12 @@ def _parser() -> Parser:
     _estimate.add_parser(sub)
     _discover.add_parser(sub)
     _bench.add_parser(sub)
-    from . import _convert, _fleet
-
     _convert.add_parser(sub)
     _fleet.add_parser(sub)
     return p
 
 
 def _dispatch(argv: list[str]) -> int:
-    from ..discover import _cli as _discover
-    from . import _bench, _estimate, _run, _sweep
-
     if argv and not argv[0].startswith("-") and argv[0] not in COMMANDS:
         raise UsageError(
             f"hdjax: unknown command {argv[0]!r}{did_you_mean(argv[0], COMMANDS)}; commands: "
@@ -68,8 +65,6 @@ def _dispatch(argv: list[str]) -> int:
     if not argv or argv[0].startswith("-"):
         args = parser.parse_strict(argv)
         if args.version:
-            from .. import __version__
-
             print(f"hdjax {__version__}")
         else:
             parser.print_help()
@@ -83,8 +78,6 @@ def _dispatch(argv: list[str]) -> int:
         "discover": _discover,
         "bench": _bench,
     }
-    from . import _convert, _fleet
-
     handlers["convert"], handlers["fleet"] = _convert, _fleet
     return handlers[argv[0]].command(args, sub)
 
@@ -92,8 +85,6 @@ def _dispatch(argv: list[str]) -> int:
 def _compilation_cache(argv: list[str]) -> list[str]:
     """Turn JAX's persistent compilation cache on (off with `--no-cache`, accepted by every
     command, or `HDJAX_NO_CACHE=1`); returns `argv` without `--no-cache`."""
-    from .._cache import disable_compilation_cache, enable_compilation_cache
-
     end = argv.index("--") if "--" in argv else len(argv)
     off = "--no-cache" in argv[:end] or os.environ.get("HDJAX_NO_CACHE", "") not in ("", "0")
     if off:
@@ -141,8 +132,6 @@ def main(argv=None) -> int:
     `hdjax: error: <file>: <what went wrong>; <what to do>`), 130 after SIGINT (Ctrl-C) and
     143 after SIGTERM, with no partial result left behind.
     """
-    from .._interrupts import Interrupted, handling, pending
-
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
 
     def fail(text: str) -> int:

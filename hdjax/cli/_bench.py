@@ -2,6 +2,14 @@
 
 from __future__ import annotations
 
+from .._errors import ConfigError
+from .._joint import Joint
+from ..compliance import ComplianceModel, calibrate_lstsq, estimate_torque
+from ..compliance._nested import nested_fit
+from ..config import check_memory, synthetic_recording
+from ..pipelines._paper import PAPER_MS_PER_100, stacked_signals
+from ._common import Progress
+
 HELP = "time estimation and the polynomial-order sweep on this machine (prints JSON)"
 EXAMPLE = """\
 example:
@@ -24,15 +32,10 @@ def add_parser(sub) -> None:
 def command(args, parser) -> int:
     import json
 
-    from .._errors import ConfigError
-    from ._common import Progress
-
     if args.samples < 1000:
         raise ConfigError(f"--samples must be at least 1000, got {args.samples}")
     if args.repeats < 1:
         raise ConfigError(f"--repeats must be at least 1, got {args.repeats}")
-    from ..config import check_memory
-
     # the order-8 design of the paper's structure: 5 + 5 x 21 columns, held about three times
     check_memory(
         args.samples * (110 * 8 * 3 + 40 * 8),
@@ -56,12 +59,6 @@ def bench_sweep(n_samples: int, repeats: int, progress=None) -> dict:
     import timeit
 
     import jax
-
-    from .._joint import Joint
-    from ..compliance import ComplianceModel, calibrate_lstsq, estimate_torque
-    from ..compliance._nested import nested_fit
-    from ..config import synthetic_recording
-    from ..pipelines._paper import PAPER_MS_PER_100, stacked_signals
 
     say = progress or (lambda m: None)
     joint = Joint(ratio=160.0, rated_torque=400.0)

@@ -7,6 +7,10 @@ import sys
 import time
 
 from .._errors import ConfigError, did_you_mean
+from .._interrupts import check
+from .._io import TOML_HINT, ColumnMap, read_text
+from ..config import parse_toml, parse_value
+from ..config._dataset import resolve_path
 
 
 class UsageError(Exception):
@@ -64,8 +68,6 @@ class Progress:
         self.t0 = time.perf_counter()
 
     def __call__(self, message: str) -> None:
-        from .._interrupts import check
-
         check()  # a signal whose exception was swallowed ends the command here
         if self.quiet:
             return
@@ -79,8 +81,6 @@ class Progress:
 
 def parse_overrides(items: list[str] | None) -> dict:
     """`["model.poly_order=4", ...]` -> `{"model.poly_order": 4}` (values read as TOML)."""
-    from ..config import parse_value
-
     out = {}
     for item in items or []:
         key, sep, value = item.partition("=")
@@ -113,8 +113,6 @@ def experiment_inputs(exp) -> list:
     [`hdjax.report.check_output_dir`][]."""
     from pathlib import Path
 
-    from ..config._dataset import resolve_path
-
     paths = [exp.path] if getattr(exp, "path", None) is not None else []
 
     def walk(v):
@@ -143,10 +141,6 @@ def read_column_map(path):
     `columns`, `extras` and the CSV text `encoding`; other keys of the table are ignored, so an
     experiment config serves as a column map."""
     from pathlib import Path
-
-    from .._errors import ConfigError
-    from .._io import TOML_HINT, ColumnMap, read_text
-    from ..config import parse_toml
 
     cpath = Path(path)
     if not cpath.exists():

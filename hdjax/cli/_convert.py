@@ -4,6 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .._errors import ConfigError, DataError
+from .._formats import _check_exists, iter_recordings, reader
+from .._formats._parquet import ParquetWriter
+from ..report import check_output_file
+from ._common import Progress, read_column_map as read_column_map
+
 HELP = "convert a log (CSV, .npz, HDF5, MATLAB v7.3, MCAP) to Parquet, chunk by chunk"
 EXAMPLE = """\
 example:
@@ -30,23 +36,12 @@ def add_parser(sub) -> None:
     p.add_argument("--quiet", "-q", action="store_true", help="no progress lines on stderr")
 
 
-def read_column_map(path):
-    """The [`hdjax.ColumnMap`][] of a TOML file's `[data]` table (or of its top level)."""
-    from ._common import read_column_map as read
-
-    return read(path)
-
-
 def convert(src, dst, columns=None, *, chunk: int = 1 << 20, progress=None) -> int:
     """Write the log `src` to the Parquet file `dst` (atomically); returns the row count.
 
     With a [`hdjax.ColumnMap`][] the chunks are mapped recordings (schema columns in SI
     units); without, the raw numeric columns are copied.
     """
-    from .._errors import ConfigError, DataError
-    from .._formats import _check_exists, iter_recordings, reader
-    from .._formats._parquet import ParquetWriter
-
     src, dst = Path(src), Path(dst)
     if dst.suffix.lower() not in (".parquet", ".pq"):
         raise ConfigError(f"{dst}: the output must be a .parquet file")
@@ -90,9 +85,6 @@ def _is_parquet(path: Path) -> bool:
 
 
 def command(args, parser) -> int:
-    from ..report import check_output_file
-    from ._common import Progress
-
     progress = Progress(args.quiet)
     out = Path(args.output)
     check_output_file(

@@ -4,6 +4,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
+# compliance.estimate_torque is looked up at each call (a test stops the command there)
+from .. import compliance
+from .._errors import ConfigError, DataError, ModelMismatchError, UnitWarning
+from .._io import atomic_write_bytes, load_recording
+from .._joint import load_joint
+from .._metrics import error_metrics
+from ..config import check_compatible, load_model
+from ..config._preflight import check_read_memory
+from ..config._saved_model import angle_ratio_mismatch
+from ..network import predict_torque as net_estimate
+from ..report import check_output_file
+from ._common import Progress, read_column_map
+
 HELP = "estimate torque on a new recording with a saved model (CSV in, CSV out)"
 EXAMPLE = """\
 example:
@@ -61,16 +74,6 @@ def command(args, parser) -> int:
 
     import numpy as np
 
-    from .._errors import ConfigError, DataError, ModelMismatchError, UnitWarning
-    from .._io import atomic_write_bytes, load_recording
-    from .._joint import load_joint
-    from .._metrics import error_metrics
-    from ..config import check_compatible, load_model
-    from ..config._preflight import check_read_memory
-    from ..config._saved_model import angle_ratio_mismatch
-    from ..report import check_output_file
-    from ._common import Progress, read_column_map
-
     progress = Progress(args.quiet)
     out = Path(args.out)
     model_path = Path(args.model)
@@ -113,17 +116,13 @@ def command(args, parser) -> int:
     if args.method == "network":
         if saved.network is None:
             raise ModelMismatchError(f"{model_path}: holds no network; use --method model")
-        from ..network import predict_torque as net_estimate
-
         cols["torque_estimate"] = np.asarray(net_estimate(saved.network, rec, saved.joint))
     else:
         if saved.compliance is None:
             raise ModelMismatchError(
                 f"{model_path}: holds no compliance model; use --method network"
             )
-        from ..compliance import estimate_torque
-
-        est = estimate_torque(saved.compliance, rec)
+        est = compliance.estimate_torque(saved.compliance, rec)
         cols["torque_estimate"] = np.asarray(est.torque)
         cols["in_range"] = np.asarray(est.in_range).astype(np.float64)
     if rec.torque is not None:

@@ -8,6 +8,11 @@ import sys
 import time
 from pathlib import Path
 
+from .._errors import ConfigError
+from .._formats import require
+from ..fleet import drift_figure, load_manifest, run_task, write_table
+from ..report import ResultDir, markdown_table, read_marker
+
 HELP = "run calibrate + discover (or estimate) on every joint-log of a manifest, on Dask"
 EXAMPLE = """\
 example:
@@ -77,9 +82,6 @@ class ProgressBar:
 
 def _client(args, n_tasks: int):
     """A Dask client: of the cluster at --scheduler, or of a new local cluster."""
-    from .._errors import ConfigError
-    from .._formats import require
-
     require("distributed", "fleet")
     import logging
 
@@ -118,9 +120,6 @@ def _cached(folder: Path, task_id: str) -> dict | None:
 
 def command(args, parser) -> int:
     import jax
-
-    from ..fleet import load_manifest, run_task, write_table
-    from ..report import ResultDir, read_marker
 
     man = load_manifest(args.manifest)
     out = Path(args.out)
@@ -233,9 +232,6 @@ def _running(client, futures) -> int:
 
 
 def _report(man, rows, rd) -> None:
-    from ..fleet import drift_figure
-    from ..report import markdown_table
-
     lines = [
         f"# Fleet {man.settings['name']}",
         "",

@@ -5,6 +5,24 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+# compliance.estimate_torque is looked up at each call (a test stops the command there)
+from .. import compliance
+from .._errors import InversionError
+from ..compliance import check_invertible
+from ..config import (
+    build_dataset,
+    dumps_toml,
+    load_experiment,
+    preflight,
+    save_model,
+    with_absolute_paths,
+)
+from ..config._preflight import check_angles
+from ..network import predict_torque as net_estimate
+from ..pipelines import _paper as P
+from ..report import ResultDir, environment, error_rate_figure, markdown_table, torque_figure
+from ._common import Progress, add_common, experiment_inputs, parse_overrides
+
 HELP = "run an experiment config: calibrate, estimate, score, write figures and a report"
 EXAMPLE = """\
 example:
@@ -32,16 +50,10 @@ def add_parser(sub) -> None:
     )
     p.add_argument("--no-figures", action="store_true", help="skip the figures (faster)")
     p.add_argument("--no-network", action="store_true", help="skip the network method")
-    from ._common import add_common
-
     add_common(p)
 
 
 def command(args, parser) -> int:
-    from ..config import load_experiment, preflight
-    from ..report import ResultDir
-    from ._common import Progress, experiment_inputs, parse_overrides
-
     progress = Progress(args.quiet)
     overrides = parse_overrides(args.set)
     if args.no_figures:
@@ -65,13 +77,6 @@ def command(args, parser) -> int:
 def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
     """Carry out an experiment into a [`hdjax.report.ResultDir`][]; returns a text summary."""
     import numpy as np
-
-    from .._errors import InversionError
-    from ..compliance import check_invertible
-    from ..config import build_dataset, dumps_toml, save_model, with_absolute_paths
-    from ..config._preflight import check_angles
-    from ..pipelines import _paper as P
-    from ..report import environment
 
     t_start = time.perf_counter()
     cfg = exp
@@ -122,10 +127,10 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
     }
     first_test = next(iter(ds.test.values()))
     if outputs["timing"]:
-        from ..compliance import estimate_torque
-
         metrics["model"]["timing"] = P.time_per_100(
-            lambda r: estimate_torque(cal.model, r).torque, first_test, outputs["timing_repeats"]
+            lambda r: compliance.estimate_torque(cal.model, r).torque,
+            first_test,
+            outputs["timing_repeats"],
         )
 
     # -- the network method ------------------------------------------------------------------
@@ -149,8 +154,6 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
             "scenarios": P.metrics_of(est_n, ds.test, rated),
         }
         if outputs["timing"]:
-            from ..network import predict_torque as net_estimate
-
             metrics["network"]["timing"] = P.time_per_100(
                 lambda r: net_estimate(net, r, joint), first_test, outputs["timing_repeats"]
             )
@@ -167,8 +170,6 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
     # -- figures -----------------------------------------------------------------------------
     figures: list[tuple[str, str]] = []
     if outputs["figures"]:
-        from ..report import error_rate_figure, torque_figure
-
         progress("drawing figures")
         for method, est in (("model", est_m), ("network", est_n)):
             if est is None:
@@ -226,9 +227,6 @@ def _row(metrics: dict, method: str, scenario: str):
 
 def render_report(cfg: dict, metrics: dict, figures: list[tuple[str, str]]) -> str:
     """The `report.md` of a run: what ran, the error table (with the paper's), figures."""
-    from ..pipelines import _paper as P
-    from ..report import markdown_table
-
     env = metrics["environment"]
     lines = [
         f"# {cfg['experiment']['name']}",

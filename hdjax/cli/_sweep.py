@@ -7,6 +7,26 @@ import json
 import time
 from pathlib import Path
 
+from .._errors import ConfigError, HdjaxError
+from ..compliance import estimate_torque_arrays
+from ..compliance._nested import batched_estimates, nested_fit
+from ..config import (
+    Experiment,
+    apply_setting,
+    build_dataset,
+    check_sweep_setting,
+    dumps_toml,
+    load_experiment,
+    parse_value,
+    preflight,
+    with_absolute_paths,
+)
+from ..config._preflight import check_angles
+from ..pipelines import _paper as P
+from ..reference import describe_column_reference
+from ..report import ResultDir, environment, find_knee, markdown_table, sweep_figure
+from ._common import Progress, add_common, experiment_inputs, parse_overrides
+
 HELP = "sweep one setting (e.g. the polynomial order 1-8): held-out error and time, knee marked"
 EXAMPLE = """\
 example:
@@ -46,16 +66,11 @@ def add_parser(sub) -> None:
         action="store_true",
         help="ignore member results cached by an earlier, interrupted run",
     )
-    from ._common import add_common
-
     add_common(p)
 
 
 def parse_values(text: str) -> list:
     """`"1:8"` -> 1..8, `"1,2,4"` -> [1, 2, 4], `"[[10],[20]]"` -> [[10], [20]]."""
-    from .._errors import ConfigError
-    from ..config import parse_value
-
     text = text.strip()
     if text.startswith("["):
         v = parse_value(text)
@@ -78,9 +93,6 @@ def parse_values(text: str) -> list:
 
 
 def command(args, parser) -> int:
-    from ..config import check_sweep_setting, load_experiment
-    from ._common import Progress, parse_overrides
-
     progress = Progress(args.quiet)
     exp = load_experiment(args.config, parse_overrides(args.set))
     setting = check_sweep_setting(args.setting or exp["sweep"]["setting"], where="--setting")
@@ -120,18 +132,12 @@ def run_sweep(
     force=False,
 ):
     """Run a sweep into `out` (atomically, resumable); returns a text summary."""
-    from .._errors import ConfigError
-    from ..config import apply_setting, preflight
-    from ..report import ResultDir
-
     cfgs = [apply_setting(dict(exp), setting, v, where="sweep member") for v in values]
     if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
         raise ConfigError(f"sweep values repeat: {values}")
     for v, c in zip(values, cfgs):  # every member is checked before the first one runs
         preflight(c, base_dir=exp.base_dir, where=f"sweep member {setting} = {v!r}")
     staging = out.parent / f"{out.name}.partial"
-    from ._common import experiment_inputs
-
     inputs = experiment_inputs(exp)
     for c in cfgs:
         inputs += experiment_inputs(_with_path(c, exp))
@@ -154,10 +160,6 @@ def run_sweep(
 
 def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force):
     import numpy as np
-
-    from ..config import build_dataset, dumps_toml, with_absolute_paths
-    from ..config._preflight import check_angles
-    from ..report import environment, find_knee, markdown_table, sweep_figure
 
     fp = _fingerprint(dict(exp), setting)
     cached: dict[int, dict] = {}
@@ -308,8 +310,6 @@ def _reference_of(ds) -> dict:
 
 def _reference_of_config(cfg: dict) -> dict:
     """The same, from the config alone (members cached by a sweep that did not record it)."""
-    from ..reference import describe_column_reference
-
     kind = cfg["data"]["reference"]["kind"]
     if kind == "column":
         desc = describe_column_reference(cfg["data"]["columns"], cfg["data"]["kind"])
@@ -319,8 +319,6 @@ def _reference_of_config(cfg: dict) -> dict:
 
 
 def _with_path(cfg: dict, exp):
-    from ..config import Experiment
-
     new = Experiment(cfg)
     new.path = exp.path
     return new
@@ -350,9 +348,6 @@ def _pooled(torques: dict, ds) -> dict:
 
 def _member_loop(cfg: dict, ds, method: str, seed: int) -> dict:
     """Fit and score one member on its own (any setting)."""
-    from .._errors import HdjaxError
-    from ..pipelines import _paper as P
-
     t0 = time.perf_counter()
     try:
         if method == "network":
@@ -383,13 +378,8 @@ def _members_nested(exp, setting, values, todo, cfgs, ds, progress):
     """Polynomial / Fourier orders: one Gram pass, per-member solves, one batched estimate."""
     import numpy as np
 
-    from ..compliance._nested import batched_estimates, nested_fit
-    from ..pipelines import _paper as P
-
     scale = P.current_scale(exp, ds.train)
     vmax = max(values[i] for i in todo)
-    from ..config import apply_setting
-
     big = P.build_model(apply_setting(dict(exp), setting, vmax), ds.joint, scale)
     members = [P.build_model(cfgs[i], ds.joint, scale) for i in todo]
     progress(
@@ -410,8 +400,6 @@ def _members_nested(exp, setting, values, todo, cfgs, ds, progress):
         f = fits[k]
         tq = torques[k]
         if tq is None and f.model is not None and not f.message:
-            from ..compliance import estimate_torque_arrays
-
             tq = np.asarray(estimate_torque_arrays(f.model, test_sig))
         if tq is None:
             res = {"rms": None, "max": None, "message": f.message or "not estimable"}
