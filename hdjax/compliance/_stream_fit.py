@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import CalibrationError, DataError, InversionError
+from .._formats import iter_recordings
 from .._recording import Recording
 from ._lstsq import (
     CSNE_MAX_COND,
@@ -81,8 +82,6 @@ class RecordingStream:
     @classmethod
     def from_files(cls, paths, columns=None, *, chunk: int, check_units=True) -> RecordingStream:
         """Log files (any format of `hdjax.load_recording`) read `chunk` samples at a time."""
-        from .._formats import iter_recordings
-
         paths = [paths] if isinstance(paths, str) or hasattr(paths, "suffix") else list(paths)
         _check_chunk(chunk)
 

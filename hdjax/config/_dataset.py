@@ -24,10 +24,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import plant
 from .._errors import ConfigError
 from .._io import ColumnMap, load_csv, load_npz, load_recording
 from .._joint import Joint
 from .._recording import Recording, make_recording
+from ..compliance import paper_knots
+from ..reference import describe_column_reference, load_with_reference
 from ._schema import joint_of
 
 
@@ -75,8 +78,6 @@ def build_dataset(exp, progress=None) -> Dataset:
     if data["settle"] > 0:
         ds = _drop_settling(ds, data["settle"])
     if data["reference"]["kind"] == "column":
-        from ..reference import describe_column_reference
-
         ds.reference = {
             "kind": "column",
             "description": describe_column_reference(data["columns"], data["kind"]),
@@ -136,8 +137,6 @@ def _load(path: Path, fmt: str, cmap: ColumnMap, check_units: bool, exp) -> tupl
     spec = exp["data"]["reference"]
     if spec["kind"] != "wrench":
         return loader(path, cmap, check_units=check_units), None
-    from ..reference import load_with_reference
-
     rec, ref = load_with_reference(
         path, cmap, spec, loader, base_dir=exp.base_dir, check_units=check_units
     )
@@ -232,15 +231,8 @@ def _from_plant(exp, joint: Joint, say) -> Dataset:
 def plant_simulator(data: dict):
     """A function `(scenario, duration, seed) -> Recording` for the `[data]` plant settings.
 
-    **Raises:** [`hdjax.ConfigError`][] when the built-in plant or its scenarios are not
-    available in this installation.
+    **Raises:** [`hdjax.ConfigError`][] when the built-in plant has no scenarios.
     """
-    try:
-        from .. import plant
-    except ImportError as err:  # pragma: no cover - depends on the installation
-        raise ConfigError(
-            f'the built-in plant is not available ({err}); use [data] kind = "files" or "synthetic"'
-        ) from None
     scenario = getattr(plant, "simulate_scenario", None)
     if scenario is None:
         raise ConfigError(
@@ -305,8 +297,6 @@ def synthetic_recording(
     current = current + i_scale * (friction + 0.01 * rng.standard_normal(n_samples))
     k = np.array([0.26305, 0.19913, 0.04946, 0.29008, 0.08434]) * (1 / 6.7e4 / 0.26305)
     k_torque_order = np.array([k[2], k[1], k[0], k[3], k[4]])
-    from ..compliance import paper_knots
-
     knots = list(paper_knots(tau0, 5))
     bounds = list(zip([-np.inf, *knots], [*knots, np.inf]))
     hinge = np.stack([np.clip(torque, lo, hi) - min(max(0.0, lo), hi) for lo, hi in bounds], axis=1)

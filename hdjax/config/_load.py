@@ -9,6 +9,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from .._errors import ConfigError
+from .._io import TOML_HINT, read_text
 from ._schema import apply_setting, resolve
 
 _POSITION = re.compile(r"^(?P<msg>.*?)\s*\(at line (?P<line>\d+), column (?P<col>\d+)\)\s*$")
@@ -71,8 +72,6 @@ def load_experiment(path, overrides: Mapping[str, object] | None = None) -> Expe
         raise ConfigError(f"{path}: no such experiment file")
     if path.is_dir():
         raise ConfigError(f"{path}: is a directory; give an experiment .toml file")
-    from .._io import TOML_HINT, read_text
-
     doc = parse_toml(read_text(path, what="experiment file", hint=TOML_HINT), where=str(path))
     cfg = resolve(doc, where=str(path))
     for setting, value in (overrides or {}).items():

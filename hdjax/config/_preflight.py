@@ -11,7 +11,10 @@ import math
 import os
 from pathlib import Path
 
-from .._errors import ConfigError, HdjaxError
+from .._errors import ConfigError, HdjaxError, ModelMismatchError
+from ..compliance import ComplianceModel
+from ._saved_model import ratio_mismatch
+from ._schema import joint_of
 
 # Bytes per sample, beyond the design matrix: the recording, its signals and velocities, the
 # estimate and its error (about 40 float64 arrays of the recording's length).
@@ -90,9 +93,6 @@ def check_read_memory(paths, *, fix: str, free: int | None = None) -> None:
 
 def _n_coef(cfg: dict, where: str) -> int:
     """The number of model terms of a `[model]` table (the model is built to count them)."""
-    from ..compliance import ComplianceModel
-    from ._schema import joint_of
-
     m = cfg["model"]
     try:
         model = ComplianceModel.paper(
@@ -169,9 +169,6 @@ def check_angles(ds, *, force: bool = False, warn=None) -> str:
 
     **Raises:** [`hdjax.ModelMismatchError`][] naming the recording, unless `force`.
     """
-    from .._errors import ModelMismatchError
-    from ._saved_model import ratio_mismatch
-
     whys: dict = {}  # source -> why (a file split into calibration and test parts: once)
     for rec in list(ds.train) + list(ds.test.values()):
         why = ratio_mismatch(ds.joint.ratio, rec)

@@ -22,10 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import __version__
 from .._errors import DataError, ModelMismatchError
 from .._io import atomic_write_bytes
 from .._joint import Joint
 from .._recording import Recording
+from ..compliance import ComplianceModel
+from ..network import FeatureLayout, Network
 
 FORMAT = "hdjax-model"
 FORMAT_VERSION = 1
@@ -97,8 +100,6 @@ def _network_from_dict(d: dict):
     import jax
     import jax.numpy as jnp
 
-    from ..network import FeatureLayout, Network
-
     lay = d["layout"]
     layout = FeatureLayout(
         tuple(lay["names"]), bool(lay["periodic"]), tuple(lay["orders"]), bool(lay["kalman"])
@@ -132,8 +133,6 @@ def save_model(path, joint: Joint, *, compliance=None, network=None, meta=None) 
 
     **Returns:** the path written.
     """
-    from .. import __version__
-
     if compliance is None and network is None:
         raise ModelMismatchError("nothing to save: give a compliance model, a network or both")
     payload = {
@@ -163,8 +162,6 @@ def load_model(path) -> SavedModel:
     **Raises:** [`hdjax.DataError`][] for a missing, unreadable, truncated or edited file
     (checksum mismatch); [`hdjax.ModelMismatchError`][] for another format or version.
     """
-    from ..compliance import ComplianceModel
-
     path = Path(path)
     if not path.exists():
         raise DataError(f"{path}: no such model file")

@@ -14,6 +14,7 @@ import math
 from collections.abc import Callable, Mapping
 
 from .._errors import ConfigError, check_keys, did_you_mean
+from .._io import check_encoding
 from .._joint import Joint
 from ..reference._spec import check_reference
 
@@ -92,8 +93,6 @@ def _table(key, v):
 
 
 def _encoding(key, v):
-    from .._io import check_encoding
-
     return check_encoding(v, where=key)
 
 

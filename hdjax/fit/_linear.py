@@ -42,6 +42,7 @@ import optimistix as optx
 from .._errors import CalibrationError, ConfigError, DataError
 from .._features import signals
 from .._recording import Recording
+from ..compliance._lstsq import select_active
 
 METHODS = ("gauss_newton", "levenberg_marquardt", "adam")
 
@@ -81,8 +82,6 @@ def linear_problem(model, recording: Recording, active=None) -> LinearProblem:
     `active` (mask) defaults to the coefficients [`hdjax.compliance.calibrate_lstsq`][] would
     calibrate on this recording.
     """
-    from ..compliance._lstsq import select_active
-
     if not isinstance(recording, Recording) or recording.torque is None:
         raise DataError("gradient calibration needs a Recording with a reference torque")
     sig = signals(recording, model.joint, velocity=model.velocity)

@@ -23,8 +23,11 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import DataError
+from ._dh import DHArm, load_dh_table
 from ._holds import Holds, detect_holds
+from ._jacobian import jacobian_columns, tool_rotations
 from ._offset import SensorOffset, fit_offset_with_payload, no_offset, offset_from_rest
+from ._urdf import UrdfArm
 
 
 def joint_torque(jac_column, wrench, tau_model=None, *, sign: int = 1, offset=None) -> np.ndarray:
@@ -72,14 +75,10 @@ class WrenchReference:
 
 
 def _arm(spec: Mapping, base_dir: Path):
-    from ._dh import load_dh_table
-
     if "dh" in spec:
         path = Path(spec["dh"]).expanduser()
         path = path if path.is_absolute() else base_dir / path
         return load_dh_table(path), f"DH table {path.name}"
-    from ._urdf import UrdfArm
-
     path = Path(spec["urdf"]).expanduser()
     path = path if path.is_absolute() else base_dir / path
     arm = UrdfArm(path, spec["frame"], gravity=spec["gravity"])
@@ -102,9 +101,6 @@ def build_wrench_reference(
     kinematics file, non-finite values or an unknown frame.
     """
     import jax.numpy as jnp
-
-    from ._dh import DHArm
-    from ._jacobian import jacobian_columns, tool_rotations
 
     for name in spec["angles"] + spec["wrench"]:
         if name not in columns:

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import ConfigError
-from .._io import ColumnMap, ColumnSpec
+from .._io import ColumnMap, ColumnSpec, load_recording
 from .._recording import Recording
 from ._builder import WrenchReference, build_wrench_reference
-from ._spec import needed_columns
+from ._spec import check_reference, needed_columns
 
 _PREFIX = "__reference__:"
 
@@ -82,9 +82,6 @@ def load_referenced(path, columns: ColumnMap | None, table, *, base_dir, where: 
 
     **Returns:** `(recording, description)`, the description being one line for reports.
     """
-    from .._io import load_recording
-    from ._spec import check_reference
-
     spec = check_reference(f"{where}.reference", table if table is not None else {})
     if spec["kind"] == "column":
         rec = load_recording(path, columns)

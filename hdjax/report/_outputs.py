@@ -20,6 +20,7 @@ import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
+from .. import __version__
 from .._errors import ConfigError
 
 MARKER = ".hdjax-result"
@@ -111,8 +112,6 @@ def read_marker(folder) -> dict | None:
 
 def marker_bytes(command: str, files: Iterable[str], **extra) -> bytes:
     """The content of a result folder's [`MARKER`][] file."""
-    from .. import __version__
-
     doc = {
         "format": _FORMAT,
         "command": command,
