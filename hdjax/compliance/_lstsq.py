@@ -294,18 +294,7 @@ def calibrate_lstsq(model: ComplianceModel, data, *, throw: bool = True) -> Cali
     calibrated = [s_ for s_ in range(model.n_segments) if active[s_]]
     t_in = t_np[np.isin(np.searchsorted(np.asarray(model.knots), t_np, side="right"), calibrated)]
     torque_range = (float(t_in.min()), float(t_in.max())) if t_in.size else model.torque_range
-    fitted = eqx.tree_at(lambda m: m.coef, model, jnp.asarray(coef))
-    fitted = _with_static(fitted, active=tuple(bool(a) for a in active), torque_range=torque_range)
-    msg = check_invertible(fitted)
-    if msg:
-        if throw:
-            raise InversionError(msg)
-        messages.append(msg)
-    if dropped:
-        warnings.warn(
-            "calibration left out terms the data cannot reach: " + "; ".join(dropped),
-            stacklevel=2,
-        )
+    fitted = fitted_model(model, coef, active, torque_range, messages, dropped, throw)
     return CalibrationResult(
         model=fitted,
         rank=rank,
@@ -363,6 +352,25 @@ def _solve_tri(r, b):
     import scipy.linalg
 
     return scipy.linalg.solve_triangular(r, b, lower=False)
+
+
+def fitted_model(model, coef, active, torque_range, messages, dropped, throw):
+    """`model` with the solved coefficients, its active terms and calibrated torque range; an
+    `InversionError` (or, with `throw=False`, a message) when it cannot be inverted, and a
+    warning naming the terms the data could not reach. Shared by the batch and streamed fits."""
+    fitted = eqx.tree_at(lambda m: m.coef, model, jnp.asarray(coef))
+    fitted = _with_static(fitted, active=tuple(bool(a) for a in active), torque_range=torque_range)
+    msg = check_invertible(fitted)
+    if msg:
+        if throw:
+            raise InversionError(msg)
+        messages.append(msg)
+    if dropped:
+        warnings.warn(
+            "calibration left out terms the data cannot reach: " + "; ".join(dropped),
+            stacklevel=3,  # the caller of calibrate_lstsq / calibrate_stream
+        )
+    return fitted
 
 
 def _with_static(model: ComplianceModel, **changes) -> ComplianceModel:

@@ -17,7 +17,6 @@ torque it differences.
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable, Iterable, Iterator
 
 import equinox as eqx
@@ -25,15 +24,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import CalibrationError, DataError, InversionError
+from .._errors import CalibrationError, DataError
 from .._formats import iter_recordings
 from .._recording import Recording
 from ._lstsq import (
     CSNE_MAX_COND,
     CalibrationResult,
     _compact_index,
-    _with_static,
-    check_invertible,
+    fitted_model,
     select_active_counts,
     solve_from_r,
 )
@@ -371,18 +369,7 @@ def calibrate_stream(
         torque_range = (float(t_lo[calibrated].min()), float(t_hi[calibrated].max()))
     else:
         torque_range = model.torque_range
-    fitted = eqx.tree_at(lambda m: m.coef, model, jnp.asarray(coef))
-    fitted = _with_static(fitted, active=tuple(bool(a) for a in active), torque_range=torque_range)
-    msg = check_invertible(fitted)
-    if msg:
-        if throw:
-            raise InversionError(msg)
-        messages.append(msg)
-    if dropped:
-        warnings.warn(
-            "calibration left out terms the data cannot reach: " + "; ".join(dropped),
-            stacklevel=2,
-        )
+    fitted = fitted_model(model, coef, active, torque_range, messages, dropped, throw)
     return CalibrationResult(
         model=fitted,
         rank=rank,
