@@ -301,6 +301,31 @@ def _read_csv_table(path: Path, encoding: str | None = None) -> tuple[list[str],
     return header, body
 
 
+def schema_spec(columns: ColumnMap, name: str, available, source) -> ColumnSpec | None:
+    """The spec giving schema column `name`: the map's own, else the file's column of that
+    name; `None` for an absent torque (optional); a `DataError` listing the file's columns
+    otherwise."""
+    spec = columns.columns.get(name)
+    if spec is not None:
+        return spec
+    if name in available:
+        return ColumnSpec(source=name)
+    if name == "torque":
+        return None
+    raise DataError(
+        f"{source}: missing column {name!r}{did_you_mean(name, available)}; the file "
+        f"has: {', '.join(available)}. Rename it or map it with a [data.columns] table"
+    )
+
+
+def no_source_error(source, spec: ColumnSpec, name: str, available) -> DataError:
+    """The error for a map entry whose source column the file lacks."""
+    return DataError(
+        f"{source}: no column {spec.source!r} (for {name!r})"
+        f"{did_you_mean(spec.source, available)}; the file has: {', '.join(available)}"
+    )
+
+
 def _build(
     table: Mapping[str, np.ndarray], columns: ColumnMap | None, source: str, check_units: bool
 ) -> Recording:
@@ -310,26 +335,15 @@ def _build(
 
     def read(name: str, spec: ColumnSpec) -> np.ndarray:
         if spec.source not in table:
-            raise DataError(
-                f"{source}: no column {spec.source!r} (for {name!r})"
-                f"{did_you_mean(spec.source, available)}; the file has: {', '.join(available)}"
-            )
+            raise no_source_error(source, spec, name, available)
         used.add(spec.source)
         return spec.apply(table[spec.source])
 
     signals = {}
     for name in SIGNAL_COLUMNS:
-        spec = columns.columns.get(name)
-        if spec is None:
-            if name not in table:
-                if name == "torque":
-                    continue
-                raise DataError(
-                    f"{source}: missing column {name!r}{did_you_mean(name, available)}; the file "
-                    f"has: {', '.join(available)}. Rename it or map it with a [data.columns] table"
-                )
-            spec = ColumnSpec(source=name)
-        signals[name] = read(name, spec)
+        spec = schema_spec(columns, name, available, source)
+        if spec is not None:
+            signals[name] = read(name, spec)
     if columns.extras is None:
         extras = {k: np.asarray(v, np.float64) for k, v in table.items() if k not in used}
         extras = {k: v for k, v in extras.items() if k not in SIGNAL_COLUMNS}

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._errors import DataError, did_you_mean
-from .._io import ColumnMap, ColumnSpec
+from .._errors import DataError
+from .._io import ColumnMap, ColumnSpec, no_source_error, schema_spec
 from .._recording import SIGNAL_COLUMNS, make_recording
 
 
@@ -14,25 +14,14 @@ def _plan(columns: ColumnMap | None, available: list[str], source: str) -> dict[
     columns = columns or ColumnMap()
     plan: dict[str, ColumnSpec] = {}
     for name in SIGNAL_COLUMNS:
-        spec = columns.columns.get(name)
-        if spec is None:
-            if name not in available:
-                if name == "torque":
-                    continue
-                raise DataError(
-                    f"{source}: missing column {name!r}{did_you_mean(name, available)}; the file "
-                    f"has: {', '.join(available)}. Rename it or map it with a [data.columns] table"
-                )
-            spec = ColumnSpec(source=name)
-        plan[name] = spec
+        spec = schema_spec(columns, name, available, source)
+        if spec is not None:
+            plan[name] = spec
     if columns.extras is not None:
         plan.update(columns.extras)
     for name, spec in plan.items():
         if spec.source not in available:
-            raise DataError(
-                f"{source}: no column {spec.source!r} (for {name!r})"
-                f"{did_you_mean(spec.source, available)}; the file has: {', '.join(available)}"
-            )
+            raise no_source_error(source, spec, name, available)
     return plan
 
 
