@@ -12,9 +12,8 @@ import os
 from pathlib import Path
 
 from .._errors import ConfigError, HdjaxError, ModelMismatchError
-from ..compliance import ComplianceModel
 from ._saved_model import ratio_mismatch
-from ._schema import joint_of
+from ._schema import joint_of, model_of
 
 # Bytes per sample, beyond the design matrix: the recording, its signals and velocities, the
 # estimate and its error (about 40 float64 arrays of the recording's length).
@@ -93,20 +92,8 @@ def check_read_memory(paths, *, fix: str, free: int | None = None) -> None:
 
 def _n_coef(cfg: dict, where: str) -> int:
     """The number of model terms of a `[model]` table (the model is built to count them)."""
-    m = cfg["model"]
     try:
-        model = ComplianceModel.paper(
-            joint_of(cfg),
-            n_segments=m["n_segments"],
-            poly_order=m["poly_order"],
-            current_scale=1.0,
-            kinematic=m["kinematic"],
-            fourier_order=m["fourier_order"],
-            harmonic_orders_m=tuple(m["harmonic_orders_m"]),
-            harmonic_orders_l=tuple(m["harmonic_orders_l"]),
-            per_segment=m["per_segment"],
-            velocity=m["velocity"],
-        )
+        model = model_of(cfg, joint_of(cfg), 1.0)
     except HdjaxError as err:
         raise ConfigError(f"{where} [model]: {' '.join(str(err).split())}") from None
     except (ValueError, TypeError) as err:

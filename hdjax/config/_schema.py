@@ -16,6 +16,7 @@ from collections.abc import Callable, Mapping
 from .._errors import ConfigError, check_keys, did_you_mean
 from .._io import check_encoding
 from .._joint import Joint
+from ..compliance import ComplianceModel
 from ..reference._spec import check_reference
 
 Check = Callable[[str, object], object]
@@ -368,3 +369,21 @@ def _joint_keys():
 def joint_of(cfg: Mapping) -> Joint:
     """The [`hdjax.Joint`][] of a resolved config."""
     return Joint.from_dict(cfg["joint"])
+
+
+def model_of(cfg: Mapping, joint: Joint, scale: float) -> ComplianceModel:
+    """The uncalibrated [`hdjax.compliance.ComplianceModel`][] of a resolved config's `[model]`
+    table (Song et al. 2019, eqs. (7)-(10)), with motor currents divided by `scale`."""
+    m = cfg["model"]
+    return ComplianceModel.paper(
+        joint,
+        n_segments=m["n_segments"],
+        poly_order=m["poly_order"],
+        current_scale=scale,
+        kinematic=m["kinematic"],
+        fourier_order=m["fourier_order"],
+        harmonic_orders_m=tuple(m["harmonic_orders_m"]),
+        harmonic_orders_l=tuple(m["harmonic_orders_l"]),
+        per_segment=m["per_segment"],
+        velocity=m["velocity"],
+    )

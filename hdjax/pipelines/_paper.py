@@ -21,16 +21,19 @@ from .._joint import Joint
 from .._metrics import error_metrics
 from .._recording import Recording
 from ..compliance import (
-    ComplianceModel,
     RecordingStream,
     calibrate_lstsq,
     calibrate_rls,
     calibrate_stream,
     estimate_torque,
 )
+from ..config._schema import model_of
 
 PAPER_MS_PER_100 = {"model": 9.232, "network": 25.442}
 """Song et al. Section IV.B: time to estimate 100 torques on an i7-7700H [ms]."""
+
+build_model = model_of
+"""The uncalibrated compliance model of a resolved config (`config._schema.model_of`)."""
 
 PAPER_ERRORS = {
     "model": {
@@ -69,23 +72,6 @@ def current_scale(cfg: dict, train: list[Recording]) -> float:
             f'current_scale near {peak:.4g} or to "auto"'
         )
     return value
-
-
-def build_model(cfg: dict, joint: Joint, scale: float):
-    """The uncalibrated [`hdjax.compliance.ComplianceModel`][] of a `[model]` table."""
-    m = cfg["model"]
-    return ComplianceModel.paper(
-        joint,
-        n_segments=m["n_segments"],
-        poly_order=m["poly_order"],
-        current_scale=scale,
-        kinematic=m["kinematic"],
-        fourier_order=m["fourier_order"],
-        harmonic_orders_m=tuple(m["harmonic_orders_m"]),
-        harmonic_orders_l=tuple(m["harmonic_orders_l"]),
-        per_segment=m["per_segment"],
-        velocity=m["velocity"],
-    )
 
 
 def stacked_signals(model, recordings: list[Recording]):
