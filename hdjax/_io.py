@@ -401,7 +401,8 @@ def load_recording(path, columns: ColumnMap | None = None, *, check_units: bool 
         return load_csv(path, columns, check_units=check_units)
     if suffix == ".npz":
         return load_npz(path, columns, check_units=check_units)
-    from ._formats import load as load_other  # Parquet, HDF5, MATLAB v7.3, MCAP
+    # Parquet, HDF5, MATLAB v7.3, MCAP; _formats imports this module at its top: a cycle
+    from ._formats import load as load_other
 
     return load_other(path, columns, check_units=check_units)
 

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import DataError
+from .._io import _build
 
 SUFFIXES = {
     ".csv": "_csv",
@@ -84,8 +85,7 @@ def load(path, columns=None, *, check_units: bool = True):
 
     **Returns:** a [`hdjax.Recording`][].
     """
-    from .._io import _build
-    from ._mapper import needed_sources
+    from ._mapper import needed_sources  # _mapper imports this package's helpers: a cycle
 
     path = Path(path)
     mod = reader(path)
@@ -104,7 +104,7 @@ def iter_recordings(path, columns=None, *, chunk: int, check_units: bool = True)
     file's first sample), and the time column is checked to increase across chunk boundaries,
     so concatenating the chunks gives the recording [`load`][] returns.
     """
-    from ._mapper import ChunkMapper, needed_sources
+    from ._mapper import ChunkMapper, needed_sources  # a cycle (see load)
 
     if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 2:
         raise DataError(f"chunk must be an integer >= 2 samples, got {chunk!r}")

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import DataError
-from .._io import bad_byte_error, nul_byte_error, nul_position, text_codec
+from .._io import _read_csv_table, bad_byte_error, nul_byte_error, nul_position, text_codec
 
 TEXT = True
 """The readers take the column map's `encoding` (see [`hdjax.ColumnMap`][])."""
@@ -93,8 +93,6 @@ def column_names(path, encoding: str | None = None) -> list[str]:
 
 def read_table(path, names=None, encoding: str | None = None) -> dict[str, np.ndarray]:
     """The whole file (the checks of [`hdjax.load_csv`][])."""
-    from .._io import _read_csv_table
-
     header, body = _read_csv_table(Path(path), encoding)
     keep = header if names is None else names
     return {name: body[:, header.index(name)] for name in keep}

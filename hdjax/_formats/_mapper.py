@@ -77,7 +77,7 @@ class ChunkMapper:
         return x * spec.scale + float(spec.offset)
 
     def __call__(self, table: dict[str, np.ndarray]):
-        from . import as_float_column
+        from . import as_float_column  # the package imports this module: a cycle
 
         cols = {
             name: self._apply(name, spec, table[spec.source]) for name, spec in self.plan.items()

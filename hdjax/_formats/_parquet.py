@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import DataError
+from .._io import file_mode
 from . import as_float_column, require
 
 
@@ -88,8 +89,6 @@ class ParquetWriter:
 
     def close(self) -> None:
         self.writer.close()
-        from .._io import file_mode
-
         os.chmod(self.tmp, file_mode())  # mkstemp makes 0600; results follow the umask
         os.replace(self.tmp, self.path)
 
