@@ -73,6 +73,16 @@ def _controller(feedback: bool, constrained: bool) -> TorqueController:
     return hashimoto_controller(feedback=feedback, constrained=constrained)
 
 
+def _run(feedback: bool, joint, sensor, reference):
+    """The Table I loop (eq. (19)) on `joint` (default the paper's) read through `sensor`
+    (default the true torque); `reference(sample_period)` gives the desired torque."""
+    joint = paper_joint() if joint is None else joint
+    sensor = IdealTorqueSensor() if sensor is None else sensor
+    ctl = _controller(feedback, joint.constrained)
+    ref = reference(ctl.sample_period)
+    return ctl, ref, simulate_torque_control(ctl, joint, sensor, ref)
+
+
 # ---------------------------------------------------------------------------------------------
 # Fig. 15: static characteristic
 # ---------------------------------------------------------------------------------------------
@@ -97,11 +107,9 @@ def static_characteristic(
     cycles: float = 1.25,
 ) -> StaticResult:
     """A slow triangle of desired torque, Fig. 15: joint torque against desired torque."""
-    joint = paper_joint() if joint is None else joint
-    sensor = IdealTorqueSensor() if sensor is None else sensor
-    ctl = _controller(feedback, joint.constrained)
-    ref = triangle_reference(amplitude, period, cycles, ctl.sample_period)
-    run = simulate_torque_control(ctl, joint, sensor, ref)
+    ctl, ref, run = _run(
+        feedback, joint, sensor, lambda ts: triangle_reference(amplitude, period, cycles, ts)
+    )
     err = np.asarray(run.reference - run.torque)
     rate = np.asarray(ref.rate)
     settled = np.asarray(ref.t) > 0.25 * period  # past the first rise from rest
@@ -144,11 +152,9 @@ def step_response(
     t_step: float = 0.01,
 ) -> StepResponse:
     """A torque step, Fig. 16 (the paper does not print the step size; 5 N·m as in Fig. 17)."""
-    joint = paper_joint() if joint is None else joint
-    sensor = IdealTorqueSensor() if sensor is None else sensor
-    ctl = _controller(feedback, joint.constrained)
-    ref = step_reference(amplitude, duration, ctl.sample_period, t_step)
-    run = simulate_torque_control(ctl, joint, sensor, ref)
+    ctl, ref, run = _run(
+        feedback, joint, sensor, lambda ts: step_reference(amplitude, duration, ts, t_step)
+    )
     t = np.asarray(run.t)
     y = np.asarray(run.torque)
     n_tail = max(1, int(round(0.02 / ctl.sample_period)))
@@ -196,11 +202,9 @@ def sine_tracking(
     duration: float = 0.3,
 ) -> SineResult:
     """Tracking of $A\\sin 2\\pi f t$, Fig. 17 (5 N·m, 20 Hz)."""
-    joint = paper_joint() if joint is None else joint
-    sensor = IdealTorqueSensor() if sensor is None else sensor
-    ctl = _controller(feedback, joint.constrained)
-    ref = sine_reference(amplitude, frequency, duration, ctl.sample_period)
-    run = simulate_torque_control(ctl, joint, sensor, ref)
+    ctl, ref, run = _run(
+        feedback, joint, sensor, lambda ts: sine_reference(amplitude, frequency, duration, ts)
+    )
     t = np.asarray(run.t)
     keep = t >= 0.05
     err = np.asarray(run.reference - run.torque)[keep]
