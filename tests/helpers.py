@@ -222,3 +222,15 @@ def assert_figure(data, size: tuple[int, int], *, min_ink: float = 0.01) -> np.n
     assert ink >= min_ink, f"only {ink:.2%} of the pixels are drawn"
     assert len(colours) > 16, f"only {len(colours)} colours: an empty plot"
     return img
+
+
+def tiny_config(name: str, data: str, outputs: str = "figures = false\ntiming = false\n") -> str:
+    """An experiment file for the command-line tests: a 160:1 joint, a small continuous model
+    (polynomial order 2, three segments, no kinematic terms), no network, and the given `[data]`
+    and `[outputs]` bodies (each a block of `key = value` lines)."""
+    return (
+        f'[experiment]\nname = "{name}"\n[joint]\nratio = 160\nrated_torque = 400\n'
+        f"[data]\n{data}"
+        '[model]\npoly_order = 2\nkinematic = "none"\nper_segment = false\nn_segments = 3\n'
+        f"[network]\nenabled = false\n[outputs]\n{outputs}"
+    )

@@ -25,49 +25,11 @@ from hdjax.cli import main
 from hdjax.config import synthetic_recording
 
 from .discover_data import synthetic_recording as discover_recording
+from .helpers import tiny_config
 
-CONFIG = """\
-[experiment]
-name = "tiny"
-[joint]
-ratio = 160
-rated_torque = 400
-[data]
-kind = "files"
-train = ["data.csv"]
-split = 0.3
-[model]
-poly_order = 2
-kinematic = "none"
-per_segment = false
-n_segments = 3
-[network]
-enabled = false
-[outputs]
-figures = false
-timing = false
-"""
+CONFIG = tiny_config("tiny", 'kind = "files"\ntrain = ["data.csv"]\nsplit = 0.3\n')
 
-SYNTHETIC = """\
-[experiment]
-name = "synth"
-[joint]
-ratio = 160
-rated_torque = 400
-[data]
-kind = "synthetic"
-n_samples = 600
-[model]
-poly_order = 2
-kinematic = "none"
-per_segment = false
-n_segments = 3
-[network]
-enabled = false
-[outputs]
-figures = false
-timing = false
-"""
+SYNTHETIC = tiny_config("synth", 'kind = "synthetic"\nn_samples = 600\n')
 
 JOINT = "[joint]\nratio = 160\nrated_torque = 400\n"
 COLUMNS = '[data]\ncolumns = { t = "t" }\n'

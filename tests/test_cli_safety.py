@@ -10,27 +10,9 @@ from hdjax import Joint, save_csv
 from hdjax.cli import main
 from hdjax.config import synthetic_recording
 
-CONFIG = """
-[experiment]
-name = "tiny"
-[joint]
-ratio = 160
-rated_torque = 400
-[data]
-kind = "files"
-train = ["data.csv"]
-split = 0.3
-[model]
-poly_order = 2
-kinematic = "none"
-per_segment = false
-n_segments = 3
-[network]
-enabled = false
-[outputs]
-figures = false
-timing = false
-"""
+from .helpers import tiny_config
+
+CONFIG = tiny_config("tiny", 'kind = "files"\ntrain = ["data.csv"]\nsplit = 0.3\n')
 
 
 @pytest.fixture

@@ -10,29 +10,15 @@ from pathlib import Path
 
 import pytest
 
+from .helpers import tiny_config
+
 REPO = Path(__file__).resolve().parents[1]
 
-CONFIG = """\
-[experiment]
-name = "sig"
-[joint]
-ratio = 160
-rated_torque = 400
-[data]
-kind = "synthetic"
-n_samples = 4000
-[model]
-poly_order = 2
-kinematic = "none"
-per_segment = false
-n_segments = 3
-[network]
-enabled = false
-[outputs]
-figures = false
-timing = true
-timing_repeats = 1000000
-"""
+CONFIG = tiny_config(
+    "sig",
+    'kind = "synthetic"\nn_samples = 4000\n',
+    "figures = false\ntiming = true\ntiming_repeats = 1000000\n",
+)
 
 pytestmark = pytest.mark.skipif(
     not Path("/proc/self/maps").exists(), reason="watches /proc/PID/maps for start-up"
