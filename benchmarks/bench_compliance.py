@@ -1,4 +1,4 @@
-"""Speed of the compliance model (issue 2): estimation, one-sample latency, calibration, RLS.
+"""Speed of the compliance model: estimation, one-sample latency, calibration, RLS.
 
 Run on one core, float64:
 
@@ -141,7 +141,7 @@ def numpy_model(model: ComplianceModel) -> dict:
 def main() -> dict:
     warnings.simplefilter("ignore")
     out: dict = {
-        "benchmark": "bench_compliance (issue 2)",
+        "benchmark": "bench_compliance",
         "machine": {
             "cpu": cpu_name(),
             "affinity_cores": sorted(os.sched_getaffinity(0)),

@@ -1,6 +1,6 @@
 """Benchmark: the whole residual loop on 10^5 training samples with three undeclared effects.
 
-Target (issue 6): three effects found and added in under 60 s on a 2-core CPU, compilation
+Target: three effects found and added in under 60 s on a 2-core CPU, compilation
 included (the loop runs once, from a fresh process). float64 throughout.
 
     python benchmarks/bench_discover.py [--samples 100000]

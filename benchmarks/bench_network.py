@@ -1,4 +1,4 @@
-"""Network benchmarks (issue 4): training against scikit-learn, estimation against the paper.
+"""Network benchmarks: training against scikit-learn, estimation against the paper.
 
 Targets:
 
@@ -40,7 +40,7 @@ JOINT = hdjax.Joint(ratio=160.0, rated_torque=400.0)
 def _data(n: int, seed: int = 0):
     """Training data: a plant scenario when hdjax.plant has them, else a synthetic joint."""
     try:
-        from hdjax.plant import simulate_scenario  # noqa: F401  (issue 3)
+        from hdjax.plant import simulate_scenario  # noqa: F401
 
         rec = simulate_scenario("slow", duration=n * 1e-3 / 2, key=jax.random.key(seed))
         source = "hdjax.plant scenario 'slow'"

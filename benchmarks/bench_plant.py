@@ -1,4 +1,4 @@
-"""Plant benchmarks (issue 3): prints one JSON document.
+"""Plant benchmarks: prints one JSON document.
 
 Targets: >= 50x faster than scipy.integrate.solve_ivp on the same equations and horizon,
 >= 3e5 RK4 steps/s for one trajectory, >= 5e6 steps/s summed over a vmap batch of 64 (compile
@@ -23,7 +23,7 @@ import timeit
 import jax
 
 if __name__ == "__main__":
-    _ap = argparse.ArgumentParser(description="Plant benchmarks (issue 3), JSON on stdout.")
+    _ap = argparse.ArgumentParser(description="Plant benchmarks, JSON on stdout.")
     _ap.add_argument("--devices", type=int, default=os.cpu_count() or 1, help="JAX CPU devices")
     ARGS = _ap.parse_args()
     jax.config.update("jax_num_cpu_devices", ARGS.devices)

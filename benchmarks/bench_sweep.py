@@ -1,6 +1,6 @@
 """Benchmark: sweeping the polynomial order 1-8 against fitting the single order-6 model.
 
-Target (issue 5): on 10^5 samples the whole sweep (eight calibrated models) takes less than 3x
+Target: on 10^5 samples the whole sweep (eight calibrated models) takes less than 3x
 the time of one order-6 `calibrate_lstsq`. The sweep shares one Gram pass of the order-8 model
 (and one QR of it for members too ill-conditioned for the semi-normal equations) across all
 members; the reference implementations timed in the same process are the single order-6 fit and

@@ -1,4 +1,4 @@
-"""Comparison table and figure over the plant's four scenarios (issue 4, item 4).
+"""Comparison table and figure over the plant's four scenarios.
 
 Closed-form LS, recursive LS, Adam and Levenberg-Marquardt on the compliance model, the paper's
 network, the hybrid (compliance + network on its residual) and the joint fit with plant
