@@ -163,18 +163,25 @@ def build_library(
     """
     options = LibraryOptions() if options is None else options
     spectra: dict[str, OrderSpectrum] = {}
+    resid = residual
 
-    def _spectrum_orders(signal, order_range, named, existing, n_peaks):
+    def _spectrum_orders(
+        signal, order_range, named, existing, n_peaks, *, residual=None, where=None
+    ):
+        # a family may ask for the spectrum of another signal than the residual (the ripple:
+        # residual / torque, on the samples `where` the torque is usable); it is not recorded
+        own = residual is None and where is None
+        theta = np.asarray(sig.get(signal))
         orders, spec = spectrum_orders(
-            sig.get(signal),
-            residual,
+            theta if where is None else theta[where],
+            resid if residual is None else residual,
             signal=signal,
             order_range=order_range,
             named=named,
             existing=existing,
             n_peaks=n_peaks,
         )
-        if spec is not None:
+        if spec is not None and own:
             spectra[signal] = spec
         return orders
 
