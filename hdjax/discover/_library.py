@@ -6,13 +6,17 @@ the built-in families give these keys (the report's `vocabulary`, [`hdjax.effect
 - `harmonic:theta_m:K`: $\\cos K\\theta_m, \\sin K\\theta_m$, kinematic error of the wave
   generator side (order $K$, decimal);
 - `harmonic:theta_l:K`: $\\cos K\\theta_l, \\sin K\\theta_l$, kinematic error of the output;
-- `coulomb:omega_m`, `coulomb:omega_l`: $\\tanh(\\omega/\\omega_s)$, Coulomb / Stribeck
-  friction between current and wave generator, or at the output bearing;
+- `coulomb:omega_m`, `coulomb:omega_l`: $\\tanh(\\omega/\\omega_s)$, Coulomb friction between
+  current and wave generator, or at the output bearing;
+- `stribeck:omega_m`, `stribeck:omega_l`: $e^{-(\\omega/\\omega_{st})^2}\\tanh(\\omega/\\omega_s)$,
+  the Stribeck excess, offered beside the Coulomb term of the same velocity;
 - `viscous:omega_m`, `viscous:omega_l`: $\\omega$, viscous friction;
 - `hysteresis:torque`: a Dahl state of the torque path, hysteresis of flexspline and wave
   generator;
 - `backlash:torque`: $\\tanh(T/T_b)$, lost motion around zero torque;
 - `stiffness:torque`: $(T/\\tau_0)^3$, stiffness beyond the piecewise segments;
+- `ripple:theta_m:K`, `ripple:theta_l:K`: $T/\\tau_0 \\cdot (\\sin K\\theta, \\cos K\\theta)$, a
+  compliance ripple (order from the spectrum of residual ÷ torque);
 - `damping:twist_rate`: $s(\\omega_l - \\omega_m/N)$, structural damping of the flexspline;
 - `column:NAME`: $(x - \\bar x)/s_x$, a drift with an extra column (e.g. temperature);
 - `column:NAME*torque`: $(x - \\bar x)/s_x \\cdot T/\\tau_0$, a compliance that drifts with it.
