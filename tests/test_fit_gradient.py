@@ -27,7 +27,7 @@ def problem():
     )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        closed = hc.calibrate_lstsq(model, rec).model
+        closed = hc.calibrate_lstsq(model, rec).value
     prob = fit.linear_problem(model, rec)
     return rec, model, closed, prob
 

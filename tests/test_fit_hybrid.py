@@ -23,7 +23,7 @@ def setup():
     )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ls = hc.calibrate_lstsq(structure, rec).model
+        ls = hc.calibrate_lstsq(structure, rec).value
     inp = fit.hybrid_inputs(rec, JOINT, compliance=ls)
     return rec, ls, inp
 

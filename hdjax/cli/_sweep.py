@@ -379,10 +379,10 @@ def _member_loop(cfg: dict, ds, method: str, seed: int) -> dict:
         fit_s = time.perf_counter() - t0
         torques = {
             k: e if isinstance(e, StreamedEstimate) else e.torque
-            for k, e in P.estimate_model(cal.model, ds.test).items()
+            for k, e in P.estimate_model(cal.value, ds.test).items()
         }
-        res = {**_pooled(torques, ds), "fit_s": fit_s, "n_terms": cal.n_terms}
-        res["condition"] = cal.condition
+        res = {**_pooled(torques, ds), "fit_s": fit_s, "n_terms": cal.stats["n_terms"]}
+        res["condition"] = cal.stats["condition"]
         return res
     except HdjaxError as err:
         return {

@@ -101,14 +101,14 @@ class _FitContext:
         charged to every row that uses it."""
         if self._hybrid_ls is None:
             t0 = time.perf_counter()
-            m = hc.calibrate_lstsq(self.hybrid_structure, (self.sig_train, self.tq_train)).model
+            m = hc.calibrate_lstsq(self.hybrid_structure, (self.sig_train, self.tq_train)).value
             self._hybrid_ls = (m, time.perf_counter() - t0)
         return self._hybrid_ls
 
 
 def _fit_lstsq(c: _FitContext):
     t0 = time.perf_counter()
-    model = hc.calibrate_lstsq(c.structure, (c.sig_train, c.tq_train)).model
+    model = hc.calibrate_lstsq(c.structure, (c.sig_train, c.tq_train)).value
     return ComplianceEstimator(model), time.perf_counter() - t0
 
 
@@ -118,7 +118,7 @@ def _fit_rls(c: _FitContext):
     t0 = time.perf_counter()
     perm = np.random.default_rng(0).permutation(c.tq_train.shape[0])
     shuffled = (jax.tree.map(lambda a: a[perm], c.sig_train), c.tq_train[perm])
-    model = hc.calibrate_rls(c.structure, shuffled, init_samples=2000).model
+    model = hc.calibrate_rls(c.structure, shuffled, init_samples=2000).value
     return ComplianceEstimator(model), time.perf_counter() - t0
 
 

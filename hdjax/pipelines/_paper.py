@@ -86,7 +86,7 @@ def stacked_signals(model, recordings: list[Recording]):
 
 
 def calibrate(cfg: dict, model, train: list[Recording], warn=None):
-    """Calibrate by the `[fit]` method; returns a [`hdjax.compliance.CalibrationResult`][].
+    """Calibrate by the `[fit]` method; returns the calibration's [`hdjax.Solution`][].
 
     Warnings (terms the data cannot reach) go to `warn` (a callable) when given.
     """

@@ -81,7 +81,7 @@ def periodic_features_effect(
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             ls = hc.calibrate_lstsq(structure, (sig, jnp.concatenate([r.torque for r in train])))
-        ls = ls.model
+        ls = ls.value
         scales = dahl_scales(ls)
         for periodic in (False, True):
             feats = hn.build_features(train_all, joint, periodic=periodic)
