@@ -126,7 +126,7 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
         },
         "scenarios": P.metrics_of(est_m, ds.test, rated),
     }
-    first_test = next(iter(ds.test.values()))
+    first_test = P.first_samples(next(iter(ds.test.values())), 100)
     if outputs["timing"]:
         metrics["model"]["timing"] = P.time_per_100(
             lambda r: compliance.estimate_torque(cal.value, r).torque,
@@ -176,18 +176,18 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
             if est is None:
                 continue
             for name, rec in ds.test.items():
-                e = est[name]
-                torque = e.torque if hasattr(e, "torque") else e
+                t, measured, torque, errors = P.figure_series(est[name], rec)
                 label = "model-based method" if method == "model" else "BP network"
                 rel = f"figures/{method}_{name}.png"
                 rd.write_bytes(
                     rel,
                     torque_figure(
-                        np.asarray(rec.t),
-                        np.asarray(rec.column("torque")),
-                        np.asarray(torque),
+                        t,
+                        measured,
+                        torque,
                         title=f"{label}, {name}: estimated vs measured torque",
                         rated=rated,
+                        errors=errors,
                     ),
                 )
                 figures.append((rel, f"{label}, {name}"))
