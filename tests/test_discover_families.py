@@ -151,7 +151,7 @@ def test_ripple_order_comes_from_the_spectrum_of_residual_over_torque(draws):
 
 
 def _run(train, test, true, options=OPTIONS):
-    res = discover(train, test, JOINT, options)
+    res = discover(train, test, JOINT, options).aux
     ref = refit_structure(train, test, JOINT, true, OPTIONS)
     print(res.effects, res.baseline.rms, res.final.rms, ref.rms)
     return res, ref
