@@ -184,7 +184,10 @@ class RippleFamily(AbstractFamily):
     vocabulary: ClassVar[str] = "ripple:theta_m:ORDER, ripple:theta_l:ORDER"
     options: ClassVar[dict] = {
         "ripple_orders_m": (0.5, 8.0),
-        "ripple_orders_l": (0.5, 12.0),
+        # the output side's ripple sources (an eccentric bearing or flexspline) are low orders;
+        # a high order of a partial swing under a gravity-like load is a function of the torque
+        # path and stands in for compliance structure that is no ripple
+        "ripple_orders_l": (0.5, 4.0),
         "ripple_named_orders_m": (2.0, 4.0),
         "ripple_named_orders_l": (1.0, 2.0),
         "ripple_n_peaks": 2,
