@@ -144,6 +144,7 @@ def main():
             if args.cache == "cold":  # an empty cache for each run
                 env = dict(os.environ, XDG_CACHE_HOME=str(tmp / f"cache{w}"))
             runs[w] = _run(manifest, tmp / f"out{w}", w, args.cache, env, not args.no_pin)
+            print(json.dumps({f"workers_{w}": runs[w]}), file=sys.stderr, flush=True)  # as it goes
         out.update(
             logs=args.logs,
             samples_per_log=args.samples,
