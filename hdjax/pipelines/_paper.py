@@ -212,18 +212,18 @@ def train_network(cfg: dict, joint: Joint, train: list[Recording], seed: int, va
             batch_size=n_cfg["batch_size"] or None,
         )
     fit_s = time.perf_counter() - t0
-    hist = np.asarray(res.history)
+    hist = np.asarray(res.stats["history"])
     info = {
         "trainer": n_cfg["trainer"],
         "hidden": list(n_cfg["hidden"]),
-        "n_parameters": int(res.network.n_parameters),
+        "n_parameters": int(res.value.n_parameters),
         "train_samples": int(x.shape[0]),
-        "steps": int(res.steps),
+        "steps": int(res.stats["steps"]),
         "final_loss": float(hist[-1]) if hist.size else float("nan"),
         "fit_s": fit_s,
-        "layout": list(res.network.layout.names),
+        "layout": list(res.value.layout.names),
     }
-    return res.network, info
+    return res.value, info
 
 
 def estimate_network(net, joint: Joint, recordings: dict[str, Recording]) -> dict:

@@ -112,9 +112,9 @@ def periodic_features_effect(
                     learning_rate=1e-2,
                     batch_size=1024,
                     key=jax.random.key(21 + seed),
-                ).model
+                ).value
                 estimators = {
-                    "network": NetworkEstimator(res.network, joint),
+                    "network": NetworkEstimator(res.value, joint),
                     "residual": HybridEstimator(hyb, ls, joint, tuple(residual_options.items())),
                 }
                 for name, estimator in estimators.items():
