@@ -11,7 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from .. import effects
+from .._features import find_gaps
 from .._plotting import pyplot
+from ..compliance._lstsq import prepare
 from ._loop import ARCSEC, DiscoveryResult, residual_spectra
 
 STOPPING_RULE = (
@@ -95,8 +97,6 @@ def _plot_spectra(spectra, chosen, title, path):
 def _plot_residual_vs_angle(model, data, title, path):
     plt = pyplot()
 
-    from ..compliance._lstsq import prepare
-
     sig, torque = prepare(model, data)
     r = (np.asarray(sig.twist) - np.asarray(model.predict_twist(sig, torque))) * ARCSEC
     idx = np.linspace(0, r.size - 1, min(r.size, 6000)).astype(int)
@@ -114,8 +114,6 @@ def _plot_residual_vs_angle(model, data, title, path):
 
 def _plot_torque(result: DiscoveryResult, path):
     plt = pyplot()
-
-    from .._features import find_gaps
 
     test = result.test
     final = result.steps[-1].torque_estimate if result.steps else result.baseline_estimate
