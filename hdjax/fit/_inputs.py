@@ -128,7 +128,7 @@ def hybrid_inputs(
     periodic: bool = True,
     kalman: bool = False,
     twist_rate: bool = False,
-    hysteresis: tuple[float, ...] = (),
+    hysteresis=(),  # validated below (a tuple of positive scales), with a readable error
 ) -> HybridInputs:
     """Precompute the inputs of a [`hdjax.fit.HybridModel`][] from a recording.
 

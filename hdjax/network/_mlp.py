@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, Float, PRNGKeyArray
+from .._custom_types import Array, ArrayLike, Float, PRNGKeyArray
 from .._errors import ConfigError, DataError
 from ._features import FeatureLayout, Features
 
@@ -107,7 +107,7 @@ class Network(eqx.Module):
             h = jax.nn.sigmoid(h @ w + b[lead])  # eqs. (38)-(39)
         return (h @ self.weights[-1] + self.biases[-1][lead])[..., 0]  # eq. (40), linear output
 
-    def __call__(self, x: Float[Array, "... n_features"]) -> Float[Array, ...]:
+    def __call__(self, x: Float[ArrayLike, "... n_features"]) -> Float[Array, ...]:
         """Torque [N·m] for one input vector `(n_features,)` or a batch `(n, n_features)`."""
         lead = (None,) * (x.ndim - 1)  # one mean and scale per feature, for every batch row
         z = (x - self.x_mean[lead]) / self.x_scale[lead]
