@@ -44,7 +44,8 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument(
         "--train",
         type=Path,
-        help="training recording (CSV: t, theta_m, theta_l, current, torque [+ extras])",
+        help="training recording (CSV, .npz, Parquet, HDF5, MATLAB v7.3 or MCAP, chosen by the "
+        "suffix; columns t, theta_m, theta_l, current, torque [+ extras])",
     )
     p.add_argument(
         "--test",
@@ -145,8 +146,9 @@ def _run_into(rd, args: argparse.Namespace) -> int:
             train, test, joint, cfg, cfg_notes = load_discover_config(args.config)
         else:
             joint = hdjax.load_joint(args.joint)
-            train = hdjax.load_csv(args.train)
-            test = hdjax.load_csv(args.test)
+            # every log format, by suffix, through the loader the other commands use
+            train = hdjax.load_recording(args.train)
+            test = hdjax.load_recording(args.test)
             cfg_notes = ["reference: the 'torque' column of the --train and --test files"]
     say = (lambda s: None) if args.quiet else (lambda s: print(f"[discover] {s}", file=sys.stderr))
     for w in caught:

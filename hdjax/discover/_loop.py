@@ -40,7 +40,7 @@ from .._joint import Joint
 from .._metrics import ErrorMetrics, error_metrics
 from .._recording import Recording
 from ..compliance import ComplianceModel, merge_sparse_segments
-from ..compliance._lstsq import prepare
+from ..compliance._lstsq import failure_message, prepare
 from ._folds import (
     contiguous_blocks,
     correlation_length,
@@ -159,18 +159,16 @@ def _calibrate_monotone(model, train, notes):
     """Calibrate; while an outer segment's compliance comes out non-positive, merge it inwards."""
     while True:
         res = _quiet_calibrate(model, train, notes, throw=False)
-        k = np.asarray(res.model.k)
-        act = np.asarray(res.model.active[: model.n_segments])
+        k = np.asarray(res.value.k)
+        act = np.asarray(res.value.active[: model.n_segments])
         bad = [
             j
             for j, (lo, hi) in enumerate(model.segment_bounds)
             if act[j] and not k[j] > 0 and not lo <= 0.0 < hi
         ]
         if not bad:
-            if any(m.startswith("rank-deficient") or "not increasing" in m for m in res.messages):
-                raise CalibrationError(
-                    next(m for m in res.messages if "rank" in m or "not increasing" in m)
-                )
+            if not res.ok:
+                raise CalibrationError(failure_message(res))
             return res
         j = max(bad, key=lambda j: abs(sum(model.segment_bounds[j][:1])))
         lo, hi = model.segment_bounds[j]
@@ -223,7 +221,7 @@ def calibrate_baseline(train: Recording, joint: Joint, options: DiscoverOptions,
         notes.extend(trial_notes)
         if i:
             notes.append(f"starting model fell back to {kw}")
-        return res.model
+        return res.value
     raise CalibrationError(f"no starting model could be calibrated on the training data: {last}")
 
 

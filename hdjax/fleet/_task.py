@@ -113,10 +113,10 @@ def _calibrate(spec) -> dict:
         scale = float(np.max(np.abs(np.asarray(rec.current)))) or 1.0
         res = calibrate_lstsq(_structure(spec, joint, scale), rec)
     return {
-        "n_samples": res.n_samples,
-        "coefficients": _coefficients(res.model),
-        "twist_rms_arcsec": res.residual_rms * ARCSEC,
-        "condition": res.condition,
+        "n_samples": res.stats["n_samples"],
+        "coefficients": _coefficients(res.value),
+        "twist_rms_arcsec": res.stats["residual_rms"] * ARCSEC,
+        "condition": res.stats["condition"],
     }
 
 
