@@ -86,18 +86,45 @@ def block_statistics(a, groups, y, blocks, *, chunk: int = CHUNK) -> BlockStatis
     }
     ab = np.zeros((n_blocks, p + 1, p + 1 + c_total))
     cc = {w: np.zeros((n_blocks, len(idx), w, w)) for w, idx in by_width.items()}
+    chunks = []
     b = 0
     while b < n_blocks:
         # whole blocks, at most `chunk` rows (at least one block)
         e = b + 1
         while e < n_blocks and bounds[e + 1] - bounds[b] <= chunk:
             e += 1
-        lo, hi = bounds[b], bounds[e]
+        chunks.append((b, e))
+        b = e
+
+    def stacked(lo, hi):
         m = np.empty((hi - lo, p + 1 + c_total))
         m[:, :p] = a[lo:hi]
         m[:, p] = y[lo:hi]
         for i, g in enumerate(groups):
             m[:, p + 1 + offsets[i] : p + 1 + offsets[i + 1]] = g[lo:hi]
+        return m
+
+    # Pre-pass: A^T [y | C] over the record, to make y and the candidates (nearly) orthogonal
+    # to the base design before the statistics are summed. A refit on [A | C] equals one on
+    # [A | C - A W] for any W (the same column space), so the scores are unchanged, but a
+    # candidate close to the base's span no longer loses its digits to the cancellation in
+    # C^T C - C^T A (A^T A)^{-1} A^T C.
+    proj = np.zeros((p, 1 + c_total))
+    if p:
+        aa = np.zeros((p, p))
+        ar = np.zeros((p, 1 + c_total))
+        for b, e in chunks:
+            m = stacked(bounds[b], bounds[e])
+            aa += m[:, :p].T @ m[:, :p]
+            ar += m[:, :p].T @ m[:, p:]
+        d = np.sqrt(np.diag(aa))
+        d[d == 0] = 1.0
+        proj = np.linalg.lstsq(aa / np.outer(d, d), ar / d[:, None], rcond=1e-13)[0] / d[:, None]
+    for b, e in chunks:
+        lo, hi = bounds[b], bounds[e]
+        m = stacked(lo, hi)
+        if p:
+            m[:, p:] -= m[:, :p] @ proj
         for j in range(b, e):
             rows = slice(bounds[j] - lo, bounds[j + 1] - lo)
             mb = m[rows]
@@ -106,7 +133,6 @@ def block_statistics(a, groups, y, blocks, *, chunk: int = CHUNK) -> BlockStatis
             for w, ci in cols.items():
                 x = cb[:, ci]  # (rows, g_w, w)
                 cc[w][j] = np.einsum("nga,ngb->gab", x, x)
-        b = e
     return BlockStatistics(
         ab, cc, {w: np.asarray(idx) for w, idx in by_width.items()}, cols, p, len(groups), widths
     )
