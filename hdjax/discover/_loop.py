@@ -395,6 +395,11 @@ def discover(
     cv = cross_validate(model, data, folds)
     base_cv = cv
     say(f"baseline: cross-validated torque RMS {cv.torque_rms:.4g} N·m on TRAIN")
+    if not np.isfinite(cv.torque_rms):
+        notes.append(
+            "cross-validation scores no held-out sample: every fold holds out torques outside "
+            "the range its training part calibrates, so no effect can be judged and none is added"
+        )
     extra_columns = _usable_columns(train)
     steps: list[StepResult] = []
     excluded: set[str] = set()
