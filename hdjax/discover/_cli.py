@@ -44,7 +44,8 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument(
         "--train",
         type=Path,
-        help="training recording (CSV: t, theta_m, theta_l, current, torque [+ extras])",
+        help="training recording (CSV, .npz, Parquet, HDF5, MATLAB v7.3 or MCAP, chosen by the "
+        "suffix; columns t, theta_m, theta_l, current, torque [+ extras])",
     )
     p.add_argument(
         "--test",
@@ -145,8 +146,9 @@ def _run_into(rd, args: argparse.Namespace) -> int:
             train, test, joint, cfg, cfg_notes = load_discover_config(args.config)
         else:
             joint = hdjax.load_joint(args.joint)
-            train = hdjax.load_csv(args.train)
-            test = hdjax.load_csv(args.test)
+            # every log format, by suffix, through the loader the other commands use
+            train = hdjax.load_recording(args.train)
+            test = hdjax.load_recording(args.test)
             cfg_notes = ["reference: the 'torque' column of the --train and --test files"]
     say = (lambda s: None) if args.quiet else (lambda s: print(f"[discover] {s}", file=sys.stderr))
     for w in caught:
@@ -170,7 +172,7 @@ def _run_into(rd, args: argparse.Namespace) -> int:
         )
         train, test = drop(train), drop(test)
     result = discover(train, test, joint, options, progress=say)
-    result.notes[:0] = cfg_notes + notes + [f"input warning: {w.message}" for w in caught]
+    result.aux.notes[:0] = cfg_notes + notes + [f"input warning: {w.message}" for w in caught]
     say("writing report" + ("" if args.no_figures else " and figures"))
     write_report(
         result,
@@ -186,8 +188,8 @@ def _run_into(rd, args: argparse.Namespace) -> int:
         },
     )
     say(
-        f"done in {result.seconds:.1f} s: effects {result.effects or 'none'}; TEST torque RMS "
-        f"{result.baseline.rms:.4g} -> {result.final.rms:.4g} N·m"
+        f"done in {result.stats['fit_time_s']:.1f} s: effects {result.aux.effects or 'none'}; "
+        f"TEST torque RMS {result.aux.baseline.rms:.4g} -> {result.aux.final.rms:.4g} N·m"
     )
     return 0
 

@@ -38,8 +38,9 @@ from .._errors import CalibrationError, DataError, HdjaxError, InversionError
 from .._joint import Joint
 from .._metrics import ErrorMetrics, error_metrics
 from .._recording import Recording
+from .._solution import RESULTS, Solution
 from ..compliance import ComplianceModel, merge_sparse_segments
-from ..compliance._lstsq import prepare
+from ..compliance._lstsq import failure_message, prepare
 from ._folds import (
     contiguous_blocks,
     correlation_length,
@@ -95,8 +96,8 @@ class DiscoverOptions:
 
 
 @dataclasses.dataclass
-class StepResult:
-    """One added effect with its scores and the errors after adding it."""
+class DiscoveryStep:
+    """One effect the residual loop added, with its scores and the errors after adding it."""
 
     key: str
     family: str
@@ -116,22 +117,21 @@ class StepResult:
 
 
 @dataclasses.dataclass
-class DiscoveryResult:
-    """Everything the loop found (see [`hdjax.discover.discover`][])."""
+class DiscoveryRecord:
+    """What the residual loop did, step by step: the `aux` of the [`hdjax.Solution`][] that
+    [`hdjax.discover.discover`][] returns (its `value` is the final model)."""
 
     baseline_model: ComplianceModel
     baseline: ErrorMetrics
     baseline_twist_rms_arcsec: float
     baseline_estimate: np.ndarray
-    steps: list[StepResult]
-    final_model: ComplianceModel
+    steps: list[DiscoveryStep]
     final: ErrorMetrics
     final_spectra: dict[str, OrderSpectrum]
     final_ranking: list[dict]
     notes: list[str]
     test: Recording
     train_residual_final: np.ndarray
-    seconds: float
     baseline_cv_torque_rms: float = float("nan")
     baseline_cv_twist_rms_arcsec: float = float("nan")
     unexplained: list = dataclasses.field(default_factory=list)
@@ -156,18 +156,16 @@ def _calibrate_monotone(model, train, notes):
     """Calibrate; while an outer segment's compliance comes out non-positive, merge it inwards."""
     while True:
         res = _quiet_calibrate(model, train, notes, throw=False)
-        k = np.asarray(res.model.k)
-        act = np.asarray(res.model.active[: model.n_segments])
+        k = np.asarray(res.value.k)
+        act = np.asarray(res.value.active[: model.n_segments])
         bad = [
             j
             for j, (lo, hi) in enumerate(model.segment_bounds)
             if act[j] and not k[j] > 0 and not lo <= 0.0 < hi
         ]
         if not bad:
-            if any(m.startswith("rank-deficient") or "not increasing" in m for m in res.messages):
-                raise CalibrationError(
-                    next(m for m in res.messages if "rank" in m or "not increasing" in m)
-                )
+            if not res.ok:
+                raise CalibrationError(failure_message(res))
             return res
         j = max(bad, key=lambda j: abs(sum(model.segment_bounds[j][:1])))
         lo, hi = model.segment_bounds[j]
@@ -220,7 +218,7 @@ def calibrate_baseline(train: Recording, joint: Joint, options: DiscoverOptions,
         notes.extend(trial_notes)
         if i:
             notes.append(f"starting model fell back to {kw}")
-        return res.model
+        return res.value
     raise CalibrationError(f"no starting model could be calibrated on the training data: {last}")
 
 
@@ -352,13 +350,17 @@ def discover(
     options: DiscoverOptions = DiscoverOptions(),
     *,
     progress: Callable[[str], None] | None = None,
-) -> DiscoveryResult:
+) -> Solution:
     """Run the residual loop (see the module docstring).
 
     **Arguments:** `train` (calibration and selection), `test` (reporting only; needs a
     reference torque), `joint`, `options`, `progress` (called with one line per stage).
 
-    **Returns:** a [`hdjax.discover.DiscoveryResult`][].
+    **Returns:** an [`hdjax.Solution`][]: `value` the final
+    [`hdjax.compliance.ComplianceModel`][]; `stats` `n_effects`, `baseline_test_rms` and
+    `final_test_rms` [N·m], `baseline_cv_torque_rms` and `final_cv_torque_rms` [N·m] (on
+    TRAIN), `cv_block_samples` and `fit_time_s`; `aux` the loop's
+    [`hdjax.discover.DiscoveryRecord`][] (baseline, steps, spectra, ranking, notes).
     """
     say = progress or (lambda _: None)
     t_start = time.perf_counter()
@@ -401,7 +403,7 @@ def discover(
             "the range its training part calibrates, so no effect can be judged and none is added"
         )
     extra_columns = _usable_columns(train)
-    steps: list[StepResult] = []
+    steps: list[DiscoveryStep] = []
     excluded: set[str] = set()
     ranking: list[dict] = []
     spectra: dict = {}
@@ -484,7 +486,7 @@ def discover(
         metrics, est = _test_errors(new_model, test_data, joint.rated_torque)
         model, est_train, cv = new_model, new_est, new_cv
         steps.append(
-            StepResult(
+            DiscoveryStep(
                 key=cand.key,
                 family=cand.family,
                 term=cand.term,
@@ -536,25 +538,33 @@ def discover(
             f"({base_metrics.rms:.4g} N·m), although cross-validation on TRAIN lowered it from "
             f"{base_cv.torque_rms:.4g} to {cv.torque_rms:.4g} N·m: TRAIN and TEST differ"
         )
-    return DiscoveryResult(
+    record = DiscoveryRecord(
         baseline_model=baseline_model,
         baseline=base_metrics,
         baseline_twist_rms_arcsec=base_twist,
         baseline_estimate=base_est,
         steps=steps,
-        final_model=model,
         final=final,
         final_spectra=spectra,
         final_ranking=ranking,
         notes=list(dict.fromkeys(notes)),
         test=test,
         train_residual_final=resid,
-        seconds=time.perf_counter() - t_start,
         baseline_cv_torque_rms=base_cv.torque_rms,
         baseline_cv_twist_rms_arcsec=base_cv.twist_rms_arcsec,
         unexplained=left,
         cv_block_samples=block,
     )
+    stats = dict(
+        n_effects=len(steps),
+        baseline_test_rms=base_metrics.rms,
+        final_test_rms=final.rms,
+        baseline_cv_torque_rms=base_cv.torque_rms,
+        final_cv_torque_rms=cv.torque_rms,
+        cv_block_samples=block,
+        fit_time_s=time.perf_counter() - t_start,
+    )
+    return Solution(model, RESULTS.successful, stats, aux=record)
 
 
 def refit_structure(train, test, joint: Joint, terms, options: DiscoverOptions = DiscoverOptions()):
@@ -585,8 +595,8 @@ def residual_spectra(model: ComplianceModel, data, *, orders=(0.5, 8.0)) -> dict
 
 __all__ = [
     "DiscoverOptions",
-    "DiscoveryResult",
-    "StepResult",
+    "DiscoveryRecord",
+    "DiscoveryStep",
     "discover",
     "refit_structure",
     "HdjaxError",

@@ -160,11 +160,11 @@ def calibrate(structure: ComplianceModel, data: PipelineData, notes, previous_es
     `previous_estimate`. **Returns:** (model, its torque estimate on `data`)."""
     structure = canonical(structure)
     if not has_path(structure):
-        model = quiet_calibrate(structure, data.pair(), notes).model
+        model = quiet_calibrate(structure, data.pair(), notes).value
         return model, estimate(model, data)
     driver = previous_estimate
     for _ in range(DRIVER_ROUNDS):
-        model = quiet_calibrate(structure, data.pair(driver), notes).model
+        model = quiet_calibrate(structure, data.pair(driver), notes).value
         why = hysteresis_invertible(model)
         if why:
             raise InversionError(why)
