@@ -77,7 +77,7 @@ def joints():
 @pytest.mark.parametrize("swing", ["90", "140"])
 def test_order_one_of_the_output_angle_over_a_partial_swing(joints, swing):
     for train, test in joints[swing]:
-        res = discover(train, test, JOINT, OPTIONS)
+        res = discover(train, test, JOINT, OPTIONS).aux
         true = refit_structure(train, test, JOINT, [Harmonics("theta_l", (1.0,))], OPTIONS)
         print(swing, res.effects, res.baseline.rms, res.final.rms, true.rms)
         assert "harmonic:theta_l:1" in res.effects, res.effects
@@ -87,7 +87,7 @@ def test_order_one_of_the_output_angle_over_a_partial_swing(joints, swing):
 def test_no_low_order_without_one_under_a_gravity_load(joints):
     added = []
     for train, test in joints["null"]:
-        res = discover(train, test, JOINT, OPTIONS)
+        res = discover(train, test, JOINT, OPTIONS).aux
         added.append(res.effects)
     print("effects added per joint without an output harmonic:", added)
     assert not any(LOW_ORDERS & set(a) for a in added), added
