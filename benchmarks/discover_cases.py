@@ -44,6 +44,8 @@ from hdjax.effects import (  # noqa: E402
     ColumnTimesTorque,
     Coulomb,
     Harmonics,
+    Ripple,
+    Stribeck,
     TwistHysteresis,
     TwistRate,
     Viscous,
@@ -96,6 +98,21 @@ CASES = {
         {"coulomb_l": dict(level=8.0, smoothing=5e-3)},
         {},
         lambda d: [Coulomb("omega_l", 5e-3)],
+    ),
+    "ripple_m 2/rev 3 %": (
+        "slow",
+        {"ripple_m": dict(orders=[2.0], amplitudes=[0.03], phases=[0.4])},
+        {},
+        lambda d: [Ripple("theta_m", 2.0, RATED)],
+    ),
+    "stribeck_l": (
+        "fast",
+        {
+            "coulomb_l": dict(level=6.0, smoothing=5e-3),
+            "stribeck_l": dict(peak=15.0, speed=0.03, smoothing=5e-3),
+        },
+        {},
+        lambda d: [Coulomb("omega_l", 5e-3), Stribeck("omega_l", 5e-3, 0.03)],
     ),
     "viscous_l": (
         "slow",

@@ -192,6 +192,8 @@ def _all_terms(rated):
         effects.Harmonics("theta_m", (1.0, 2.5)),
         effects.Harmonics("theta_l", (3.0,)),
         effects.Coulomb("omega_l", 0.05),
+        effects.Stribeck("omega_m", 0.5, 2.0),
+        effects.Ripple("theta_m", 2.0, rated),
         effects.Viscous("omega_m", 2.0),
         effects.Hysteresis(0.05 * rated),
         effects.TwistHysteresis(0.05 * rated, 1.5e-5),

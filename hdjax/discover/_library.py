@@ -6,13 +6,17 @@ the built-in families give these keys (the report's `vocabulary`, [`hdjax.effect
 - `harmonic:theta_m:K`: $\\cos K\\theta_m, \\sin K\\theta_m$, kinematic error of the wave
   generator side (order $K$, decimal);
 - `harmonic:theta_l:K`: $\\cos K\\theta_l, \\sin K\\theta_l$, kinematic error of the output;
-- `coulomb:omega_m`, `coulomb:omega_l`: $\\tanh(\\omega/\\omega_s)$, Coulomb / Stribeck
-  friction between current and wave generator, or at the output bearing;
+- `coulomb:omega_m`, `coulomb:omega_l`: $\\tanh(\\omega/\\omega_s)$, Coulomb friction between
+  current and wave generator, or at the output bearing;
+- `stribeck:omega_m`, `stribeck:omega_l`: $e^{-(\\omega/\\omega_{st})^2}\\tanh(\\omega/\\omega_s)$,
+  the Stribeck excess, offered beside the Coulomb term of the same velocity;
 - `viscous:omega_m`, `viscous:omega_l`: $\\omega$, viscous friction;
 - `hysteresis:torque`: a Dahl state of the torque path, hysteresis of flexspline and wave
   generator;
 - `backlash:torque`: $\\tanh(T/T_b)$, lost motion around zero torque;
 - `stiffness:torque`: $(T/\\tau_0)^3$, stiffness beyond the piecewise segments;
+- `ripple:theta_m:K`, `ripple:theta_l:K`: $T/\\tau_0 \\cdot (\\sin K\\theta, \\cos K\\theta)$, a
+  compliance ripple (order from the spectrum of residual ÷ torque);
 - `damping:twist_rate`: $s(\\omega_l - \\omega_m/N)$, structural damping of the flexspline;
 - `column:NAME`: $(x - \\bar x)/s_x$, a drift with an extra column (e.g. temperature);
 - `column:NAME*torque`: $(x - \\bar x)/s_x \\cdot T/\\tau_0$, a compliance that drifts with it.
@@ -175,18 +179,25 @@ def build_library(
     """
     options = LibraryOptions() if options is None else options
     spectra: dict[str, OrderSpectrum] = {}
+    resid = residual
 
-    def _spectrum_orders(signal, order_range, named, existing, n_peaks):
+    def _spectrum_orders(
+        signal, order_range, named, existing, n_peaks, *, residual=None, where=None
+    ):
+        # a family may ask for the spectrum of another signal than the residual (the ripple:
+        # residual / torque, on the samples `where` the torque is usable); it is not recorded
+        own = residual is None and where is None
+        theta = np.asarray(sig.get(signal))
         orders, spec = spectrum_orders(
-            sig.get(signal),
-            residual,
+            theta if where is None else theta[where],
+            resid if residual is None else residual,
             signal=signal,
             order_range=order_range,
             named=named,
             existing=existing,
             n_peaks=n_peaks,
         )
-        if spec is not None:
+        if spec is not None and own:
             spectra[signal] = spec
         return orders
 
