@@ -3,9 +3,16 @@
 Target: the 2-worker run is >= 1.7x faster than the 1-worker run (the reference, timed in the
 same run). 4 joints x 4 dated logs of `--samples` samples each (three undeclared effects whose
 amplitude drifts over the dates), task calibrate + discover. Each worker is one single-threaded
-process (as `hdjax fleet` starts them). Both runs do the same work from the same cache state:
-`--cache cold` runs both with `--no-cache`; `--cache warm` first fills a private compilation
-cache with an untimed run and then times both runs against it.
+process bound to its own core (as `hdjax fleet` starts them; `--no-pin` leaves them unbound,
+and then one worker alone spreads over more than one core: JAX's dispatch and XLA's compiler
+run beside the task). Both runs do the same work from the same cache state:
+
+- `--cache cold` (default): the command as a user first runs it, the persistent compilation
+  cache on (the CLI's default) but empty: each run gets its own new cache folder. The workers
+  of one run share it, so a program one worker compiled is loaded, not compiled again, by the
+  other (a task compiles the programs of the model structures its residual loop reaches).
+- `--cache off`: both runs with `--no-cache` (every worker compiles everything it needs).
+- `--cache warm`: a private cache filled by an untimed run, then both runs against it.
 
 Wall time is from starting the command to its exit (cluster start-up, worker imports, the
 tasks, the table and the report). The timeline splits it: `startup_s` until the first task
@@ -68,12 +75,13 @@ def _write_fleet(tmp: Path, n_logs: int, n_samples: int) -> Path:
     return tmp / "fleet.toml"
 
 
-def _run(manifest: Path, out: Path, workers: int, cache: str, env: dict) -> dict:
+def _run(manifest: Path, out: Path, workers: int, cache: str, env: dict, pin=True) -> dict:
     """One `hdjax fleet` run in a fresh process: wall, CPU seconds and the task timeline."""
     import pyarrow.parquet as pq
 
     cmd = [sys.executable, "-m", "hdjax", "fleet", str(manifest), "--out", str(out),
-           "--workers", str(workers)] + (["--no-cache"] if cache == "cold" else [])  # fmt: skip
+           "--workers", str(workers)] + (["--no-cache"] if cache == "off" else [])  # fmt: skip
+    cmd += [] if pin else ["--no-pin"]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     load = [round(x, 2) for x in os.getloadavg()]
     t0 = time.perf_counter()
@@ -105,7 +113,12 @@ def _run(manifest: Path, out: Path, workers: int, cache: str, env: dict) -> dict
         "tasks_s": round((done_at[-1] if done_at else wall) - (first - first_seconds), 2),
         "tail_s": round(wall - (done_at[-1] if done_at else wall), 2),
         "task_seconds_per_worker": {
-            str(pid): {"n": len(s), "sum": round(sum(s), 1), "max": round(max(s), 1)}
+            str(pid): {
+                "n": len(s),
+                "sum": round(sum(s), 1),
+                "max": round(max(s), 1),
+                "median": round(float(sorted(s)[len(s) // 2]), 1),
+            }
             for pid, s in per_worker.items()
         },
         "tasks_ok": sum(r["status"] == "ok" for r in rows),
@@ -116,20 +129,27 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--samples", type=int, default=10_000)
     ap.add_argument("--logs", type=int, default=16)
-    ap.add_argument("--cache", choices=("cold", "warm"), default="cold")
+    ap.add_argument("--cache", choices=("cold", "off", "warm"), default="cold")
+    ap.add_argument("--no-pin", action="store_true", help="workers not bound to cores")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="hdjax-fleet-"))
     out = {"benchmark": "hdjax fleet, 2 workers against 1", **machine()}
-    env = dict(os.environ, XDG_CACHE_HOME=str(tmp / "cache"))
     try:
         manifest = _write_fleet(tmp, args.logs, args.samples)
+        env = dict(os.environ, XDG_CACHE_HOME=str(tmp / "cache"))
         if args.cache == "warm":  # untimed: fills the private cache both timed runs load
             _run(manifest, tmp / "warmup", 2, "warm", env)
-        runs = {w: _run(manifest, tmp / f"out{w}", w, args.cache, env) for w in (1, 2)}
+        runs = {}
+        for w in (1, 2):
+            if args.cache == "cold":  # an empty cache for each run
+                env = dict(os.environ, XDG_CACHE_HOME=str(tmp / f"cache{w}"))
+            runs[w] = _run(manifest, tmp / f"out{w}", w, args.cache, env, not args.no_pin)
+            print(json.dumps({f"workers_{w}": runs[w]}), file=sys.stderr, flush=True)  # as it goes
         out.update(
             logs=args.logs,
             samples_per_log=args.samples,
             cache=args.cache,
+            workers_pinned=not args.no_pin,
             reference_1_worker=runs[1],
             workers_2=runs[2],
             worker_pids_used=len(runs[2]["task_seconds_per_worker"]),

@@ -141,10 +141,10 @@ def held_out(exp, seeds: int) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = discover(train, test, joint, opts)
-    rows["song_discover_start"] = _err(res.baseline_estimate, ref)
-    final_est = res.steps[-1].torque_estimate if res.steps else res.baseline_estimate
+    rows["song_discover_start"] = _err(res.aux.baseline_estimate, ref)
+    final_est = res.aux.steps[-1].torque_estimate if res.aux.steps else res.aux.baseline_estimate
     rows["song_discover_final"] = _err(final_est, ref)
-    rows["song_discover_final"]["effects"] = list(res.effects)
+    rows["song_discover_final"]["effects"] = list(res.aux.effects)
     # -- the network, over several seeds ------------------------------------------------------
     nets = []
     for seed in range(seeds):
@@ -168,7 +168,7 @@ def held_out(exp, seeds: int) -> dict:
         "n_train": train.n_samples,
         "n_test": test.n_samples,
         "reference": ds.reference["description"],
-        "discover_notes": list(res.notes),
+        "discover_notes": list(res.aux.notes),
         "correlation_train": corr,
     }
 

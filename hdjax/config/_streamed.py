@@ -95,7 +95,7 @@ class StreamedDataset:
 
     **Fields:** `train` (one [`hdjax.compliance.RecordingStream`][] of every calibration part),
     `test` (name -> stream), `joint`, `provenance`, `reference`, `chunk`, and `stats`
-    (source label -> [`PartStats`][] of each part).
+    (source label -> `PartStats` of each part).
     """
 
     train: RecordingStream

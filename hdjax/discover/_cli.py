@@ -172,7 +172,7 @@ def _run_into(rd, args: argparse.Namespace) -> int:
         )
         train, test = drop(train), drop(test)
     result = discover(train, test, joint, options, progress=say)
-    result.notes[:0] = cfg_notes + notes + [f"input warning: {w.message}" for w in caught]
+    result.aux.notes[:0] = cfg_notes + notes + [f"input warning: {w.message}" for w in caught]
     say("writing report" + ("" if args.no_figures else " and figures"))
     write_report(
         result,
@@ -188,8 +188,8 @@ def _run_into(rd, args: argparse.Namespace) -> int:
         },
     )
     say(
-        f"done in {result.seconds:.1f} s: effects {result.effects or 'none'}; TEST torque RMS "
-        f"{result.baseline.rms:.4g} -> {result.final.rms:.4g} N·m"
+        f"done in {result.stats['fit_time_s']:.1f} s: effects {result.aux.effects or 'none'}; "
+        f"TEST torque RMS {result.aux.baseline.rms:.4g} -> {result.aux.final.rms:.4g} N·m"
     )
     return 0
 

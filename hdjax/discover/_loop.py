@@ -39,6 +39,7 @@ from .._errors import CalibrationError, DataError, HdjaxError, InversionError
 from .._joint import Joint
 from .._metrics import ErrorMetrics, error_metrics
 from .._recording import Recording
+from .._solution import RESULTS, Solution
 from ..compliance import ComplianceModel, merge_sparse_segments
 from ..compliance._lstsq import failure_message, prepare
 from ._folds import (
@@ -98,8 +99,8 @@ class DiscoverOptions:
 
 
 @dataclasses.dataclass
-class StepResult:
-    """One added effect with its scores and the errors after adding it."""
+class DiscoveryStep:
+    """One effect the residual loop added, with its scores and the errors after adding it."""
 
     key: str
     family: str
@@ -119,22 +120,21 @@ class StepResult:
 
 
 @dataclasses.dataclass
-class DiscoveryResult:
-    """Everything the loop found (see [`hdjax.discover.discover`][])."""
+class DiscoveryRecord:
+    """What the residual loop did, step by step: the `aux` of the [`hdjax.Solution`][] that
+    [`hdjax.discover.discover`][] returns (its `value` is the final model)."""
 
     baseline_model: ComplianceModel
     baseline: ErrorMetrics
     baseline_twist_rms_arcsec: float
     baseline_estimate: np.ndarray
-    steps: list[StepResult]
-    final_model: ComplianceModel
+    steps: list[DiscoveryStep]
     final: ErrorMetrics
     final_spectra: dict[str, OrderSpectrum]
     final_ranking: list[dict]
     notes: list[str]
     test: Recording
     train_residual_final: np.ndarray
-    seconds: float
     baseline_cv_torque_rms: float = float("nan")
     baseline_cv_twist_rms_arcsec: float = float("nan")
     unexplained: list = dataclasses.field(default_factory=list)
@@ -380,13 +380,17 @@ def discover(
     options: DiscoverOptions = DiscoverOptions(),
     *,
     progress: Callable[[str], None] | None = None,
-) -> DiscoveryResult:
+) -> Solution:
     """Run the residual loop (see the module docstring).
 
     **Arguments:** `train` (calibration and selection), `test` (reporting only; needs a
     reference torque), `joint`, `options`, `progress` (called with one line per stage).
 
-    **Returns:** a [`hdjax.discover.DiscoveryResult`][].
+    **Returns:** an [`hdjax.Solution`][]: `value` the final
+    [`hdjax.compliance.ComplianceModel`][]; `stats` `n_effects`, `baseline_test_rms` and
+    `final_test_rms` [N·m], `baseline_cv_torque_rms` and `final_cv_torque_rms` [N·m] (on
+    TRAIN), `cv_block_samples` and `fit_time_s`; `aux` the loop's
+    [`hdjax.discover.DiscoveryRecord`][] (baseline, steps, spectra, ranking, notes).
 
     The loop's linear algebra is many small dense solves between JAX programs; it runs with
     one BLAS thread (`threadpoolctl`), which on a small shared machine is several times faster
@@ -396,7 +400,7 @@ def discover(
         return _discover(train, test, joint, options, progress)
 
 
-def _discover(train, test, joint, options, progress) -> DiscoveryResult:
+def _discover(train, test, joint, options, progress) -> Solution:
     say = progress or (lambda _: None)
     t_start = time.perf_counter()
     for rec, name in ((train, "TRAIN"), (test, "TEST")):
@@ -437,8 +441,13 @@ def _discover(train, test, joint, options, progress) -> DiscoveryResult:
         cv = cross_validate(model, data, folds)
     base_cv = cv
     say(f"baseline: cross-validated torque RMS {cv.torque_rms:.4g} N·m on TRAIN")
+    if not np.isfinite(cv.torque_rms):
+        notes.append(
+            "cross-validation scores no held-out sample: every fold holds out torques outside "
+            "the range its training part calibrates, so no effect can be judged and none is added"
+        )
     extra_columns = _usable_columns(train)
-    steps: list[StepResult] = []
+    steps: list[DiscoveryStep] = []
     excluded: set[str] = set()
     ranking: list[dict] = []
     spectra: dict = {}
@@ -526,7 +535,7 @@ def _discover(train, test, joint, options, progress) -> DiscoveryResult:
             twist_rms = _twist_rms(new_model, test_data)
         model, est_train, cv = new_model, new_est, new_cv
         steps.append(
-            StepResult(
+            DiscoveryStep(
                 key=cand.key,
                 family=cand.family,
                 term=cand.term,
@@ -582,25 +591,33 @@ def _discover(train, test, joint, options, progress) -> DiscoveryResult:
             f"({base_metrics.rms:.4g} N·m), although cross-validation on TRAIN lowered it from "
             f"{base_cv.torque_rms:.4g} to {cv.torque_rms:.4g} N·m: TRAIN and TEST differ"
         )
-    return DiscoveryResult(
+    record = DiscoveryRecord(
         baseline_model=baseline_model,
         baseline=base_metrics,
         baseline_twist_rms_arcsec=base_twist,
         baseline_estimate=base_est,
         steps=steps,
-        final_model=model,
         final=final,
         final_spectra=spectra,
         final_ranking=ranking,
         notes=list(dict.fromkeys(notes)),
         test=test,
         train_residual_final=resid,
-        seconds=time.perf_counter() - t_start,
         baseline_cv_torque_rms=base_cv.torque_rms,
         baseline_cv_twist_rms_arcsec=base_cv.twist_rms_arcsec,
         unexplained=left,
         cv_block_samples=block,
     )
+    stats = dict(
+        n_effects=len(steps),
+        baseline_test_rms=base_metrics.rms,
+        final_test_rms=final.rms,
+        baseline_cv_torque_rms=base_cv.torque_rms,
+        final_cv_torque_rms=cv.torque_rms,
+        cv_block_samples=block,
+        fit_time_s=time.perf_counter() - t_start,
+    )
+    return Solution(model, RESULTS.successful, stats, aux=record)
 
 
 def refit_structure(train, test, joint: Joint, terms, options: DiscoverOptions = DiscoverOptions()):
@@ -631,8 +648,8 @@ def residual_spectra(model: ComplianceModel, data, *, orders=(0.5, 8.0)) -> dict
 
 __all__ = [
     "DiscoverOptions",
-    "DiscoveryResult",
-    "StepResult",
+    "DiscoveryRecord",
+    "DiscoveryStep",
     "discover",
     "refit_structure",
     "HdjaxError",

@@ -324,9 +324,12 @@ def cross_validate(
         cnt += te.size
         per_fold.append(float(np.sqrt(sse / max(te.size, 1))))
         ests.append(est)
+    # no held-out sample inside the folds' calibrated ranges: the error is unknown (NaN), so no
+    # step can be accepted on it (a zero here would accept anything)
+    none = np.nan if cnt == 0 else 0.0
     return CrossValidation(
-        torque_rms=float(np.sqrt(sse_t / max(cnt, 1))),
-        twist_rms_arcsec=float(np.sqrt(sse_w / max(cnt, 1)) * 180 * 3600 / np.pi),
+        torque_rms=float(np.sqrt(sse_t / max(cnt, 1))) + none,
+        twist_rms_arcsec=float(np.sqrt(sse_w / max(cnt, 1)) * 180 * 3600 / np.pi) + none,
         fold_torque_rms=per_fold,
         estimates=ests,
     )
