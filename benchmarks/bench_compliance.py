@@ -158,7 +158,7 @@ def main() -> dict:
 
     # -- calibrate a paper-form model once (small, exact data) --------------------------------
     sig_c, tq_c, _ = problem(paper, 20_000, seed=1, noise=5e-7)
-    model = calibrate_lstsq(paper, (sig_c, tq_c)).model
+    model = calibrate_lstsq(paper, (sig_c, tq_c)).value
 
     # -- 1. batch torque estimation -------------------------------------------------------------
     n = 1_000_000
@@ -237,7 +237,7 @@ def main() -> dict:
             "n_coef": m.n_coef,
             "compile_and_first_call_s": first,
             "seconds": steady(lambda m=m, s=s, t=t: calibrate_lstsq(m, (s, t)), 3),
-            "condition": res.condition,
+            "condition": res.stats["condition"],
         }
         del s, t
     out["calibration_lstsq_1e6"] = {
@@ -255,7 +255,7 @@ def main() -> dict:
         ("per_segment_paper", paper, 200_000, (16, 32)),
     ):
         s, t, _ = problem(m, n_rls, seed=9, noise=5e-7)
-        ref = np.asarray(calibrate_lstsq(m, (s, t)).model.coef)
+        ref = np.asarray(calibrate_lstsq(m, (s, t)).value.coef)
         # the recursion alone, on the prepared (column-scaled) design
         A = _SegmentedDesign(m, s, jnp.asarray(t)).dense()
         A = A / np.sqrt(np.mean(A * A, axis=0))
@@ -272,7 +272,7 @@ def main() -> dict:
                 "samples_per_s_recursion": n_rls / steady(run_core, 3),
                 "samples_per_s_end_to_end": n_rls / steady(run_all, 2),
                 "max_rel_diff_vs_batch": float(
-                    np.max(np.abs(np.asarray(res.model.coef) - ref)) / np.max(np.abs(ref))
+                    np.max(np.abs(np.asarray(res.value.coef) - ref)) / np.max(np.abs(ref))
                 ),
             }
         entry["best_samples_per_s_recursion"] = max(

@@ -45,7 +45,7 @@ def main():
     t0 = time.perf_counter()
     res = discover(train, test, JOINT, DiscoverOptions(max_effects=5))
     seconds = time.perf_counter() - t0
-    found = set(res.effects)
+    found = set(res.aux.effects)
     out = {
         "benchmark": "discover loop, 3 undeclared effects",
         "machine": platform.processor() or platform.machine(),
@@ -55,10 +55,10 @@ def main():
         "train_samples": train.n_samples,
         "data_seconds": round(t_data, 2),
         "loop_seconds_including_compile": round(seconds, 2),
-        "effects": res.effects,
+        "effects": res.aux.effects,
         "expected_found": sorted(EXPECTED & found),
-        "baseline_rms": res.baseline.rms,
-        "final_rms": res.final.rms,
+        "baseline_rms": res.aux.baseline.rms,
+        "final_rms": res.aux.final.rms,
         "target_seconds": 60.0,
         "target_met": bool(seconds < 60.0 and EXPECTED <= found),
     }

@@ -107,14 +107,14 @@ def bench_training(hidden, n_train, lr, epochs, batch):
             eval_every=100,
             batch_size=batch,
         )
-        jax.block_until_ready(res.network)
+        jax.block_until_ready(res.value)
         return res
 
     t0 = time.perf_counter()
     res = run()
     first = time.perf_counter() - t0
     ours = min(timeit.repeat(run, number=1, repeat=3))
-    reached = res.stopped == "target"
+    reached = res.stats["target_reached"]
     return (
         {
             "data": source,
@@ -130,15 +130,15 @@ def bench_training(hidden, n_train, lr, epochs, batch):
                 "trainer": f"train_optax adam lr={lr} batch={batch}, stop at val RMS <= sklearn's",
                 "compile_and_first_run_s": first,
                 "steady_fit_s": ours,
-                "steps": res.steps,
-                "val_rmse_Nm": float(res.val_rmse[-1]),
+                "steps": res.stats["steps"],
+                "val_rmse_Nm": float(res.stats["val_rmse"][-1]),
                 "reached_target": reached,
             },
             "speedup": sk_time / ours,
             "target_speedup": 5.0,
             "met": bool(reached and sk_time / ours >= 5.0),
         },
-        res.network,
+        res.value,
         feats,
     )
 

@@ -40,9 +40,9 @@ t1 = time.perf_counter()
 res = calibrate_stream(model(), RecordingStream.from_files([path], chunk=chunk,
                        check_units=False), chunk=chunk)
 t2 = time.perf_counter()
-print(json.dumps({{"fit_s": t2 - t1, "import_s": t1 - t0, "n": res.n_samples,
-    "coef": np.asarray(res.model.coef).tolist(), "condition": res.condition,
-    "residual_rms_arcsec": res.residual_rms * 206264.8,
+print(json.dumps({{"fit_s": t2 - t1, "import_s": t1 - t0, "n": res.stats["n_samples"],
+    "coef": np.asarray(res.value.coef).tolist(), "condition": res.stats["condition"],
+    "residual_rms_arcsec": res.stats["residual_rms"] * 206264.8,
     "peak_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6}}))
 """
 
@@ -98,7 +98,7 @@ def main():
         rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
         del rec
         streamed_small = child(small, min(args.chunk, n_ref))
-        c_ref = np.asarray(ref.model.coef)
+        c_ref = np.asarray(ref.value.coef)
         rel = float(
             np.max(np.abs(np.asarray(streamed_small["coef"]) - c_ref)) / np.max(np.abs(c_ref))
         )

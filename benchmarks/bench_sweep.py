@@ -45,7 +45,7 @@ def main() -> None:
         data = stacked_signals(models[-1], [rec])
 
         def loop():
-            return [calibrate_lstsq(m, data).model.coef.block_until_ready() for m in models]
+            return [calibrate_lstsq(m, data).value.coef.block_until_ready() for m in models]
 
         t0 = time.perf_counter()
         loop()

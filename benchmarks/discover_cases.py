@@ -44,6 +44,8 @@ from hdjax.effects import (  # noqa: E402
     ColumnTimesTorque,
     Coulomb,
     Harmonics,
+    Ripple,
+    Stribeck,
     TwistHysteresis,
     TwistRate,
     Viscous,
@@ -96,6 +98,21 @@ CASES = {
         {"coulomb_l": dict(level=8.0, smoothing=5e-3)},
         {},
         lambda d: [Coulomb("omega_l", 5e-3)],
+    ),
+    "ripple_m 2/rev 3 %": (
+        "slow",
+        {"ripple_m": dict(orders=[2.0], amplitudes=[0.03], phases=[0.4])},
+        {},
+        lambda d: [Ripple("theta_m", 2.0, RATED)],
+    ),
+    "stribeck_l": (
+        "fast",
+        {
+            "coulomb_l": dict(level=6.0, smoothing=5e-3),
+            "stribeck_l": dict(peak=15.0, speed=0.03, smoothing=5e-3),
+        },
+        {},
+        lambda d: [Coulomb("omega_l", 5e-3), Stribeck("omega_l", 5e-3, 0.03)],
     ),
     "viscous_l": (
         "slow",
@@ -183,21 +200,21 @@ def run_case(name, duration):
     res = discover(train, test, JOINT, DiscoverOptions(max_effects=3))
     seconds = time.perf_counter() - t0
     terms = truth(train)
-    true = refit_structure(train, test, JOINT, terms) if terms else res.baseline
+    true = refit_structure(train, test, JOINT, terms) if terms else res.aux.baseline
     return dict(
         case=name,
         scenario=scenario,
         train_samples=train.n_samples,
-        effects=res.effects,
-        test_rms_start=res.baseline.rms,
-        test_rms_end=res.final.rms,
-        test_max_start=res.baseline.max,
-        test_max_end=res.final.max,
-        cv_torque_rms=[res.baseline_cv_torque_rms] + [s.cv_torque_rms for s in res.steps],
+        effects=res.aux.effects,
+        test_rms_start=res.aux.baseline.rms,
+        test_rms_end=res.aux.final.rms,
+        test_max_start=res.aux.baseline.max,
+        test_max_end=res.aux.final.max,
+        cv_torque_rms=[res.aux.baseline_cv_torque_rms] + [s.cv_torque_rms for s in res.aux.steps],
         true_structure_rms=true.rms,
-        ratio_to_true=res.final.rms / true.rms,
-        amplitudes=[s.amplitude for s in res.steps],
-        unexplained=res.unexplained,
+        ratio_to_true=res.aux.final.rms / true.rms,
+        amplitudes=[s.amplitude for s in res.aux.steps],
+        unexplained=res.aux.unexplained,
         loop_seconds=seconds,
     )
 
@@ -244,11 +261,12 @@ def lara8_splits():
                 split=name,
                 train_samples=train.n_samples,
                 test_samples=test.n_samples,
-                effects=res.effects,
-                test_rms_start=res.baseline.rms,
-                test_rms_end=res.final.rms,
-                reduction=1.0 - res.final.rms / res.baseline.rms,
-                cv_torque_rms=[res.baseline_cv_torque_rms] + [s.cv_torque_rms for s in res.steps],
+                effects=res.aux.effects,
+                test_rms_start=res.aux.baseline.rms,
+                test_rms_end=res.aux.final.rms,
+                reduction=1.0 - res.aux.final.rms / res.aux.baseline.rms,
+                cv_torque_rms=[res.aux.baseline_cv_torque_rms]
+                + [s.cv_torque_rms for s in res.aux.steps],
             )
         )
     return rows

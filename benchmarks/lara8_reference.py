@@ -120,9 +120,9 @@ def held_out(exp, seeds: int) -> dict:
         warnings.simplefilter("always")
         model0 = P.build_model(exp, joint, P.current_scale(exp, ds.train))
         cal = P.calibrate(exp, model0, ds.train)
-    est = P.estimate_model(cal.model, {test_name: test})[test_name]
+    est = P.estimate_model(cal.value, {test_name: test})[test_name]
     rows["song_config"] = _err(est.torque, ref)
-    rows["song_config"]["notes"] = [str(w.message) for w in caught] + list(cal.dropped)
+    rows["song_config"]["notes"] = [str(w.message) for w in caught] + list(cal.stats["dropped"])
     e = np.asarray(est.torque) - ref
     worst = int(np.argmax(np.abs(e)))
     rows["song_config"]["worst"] = {
@@ -131,7 +131,7 @@ def held_out(exp, seeds: int) -> dict:
         "estimate": float(est.torque[worst]),
     }
     rows["song_config"]["out_of_range"] = int(np.sum(~np.asarray(est.in_range)))
-    rows["song_config"]["calibrated_range"] = [float(v) for v in cal.model.torque_range]
+    rows["song_config"]["calibrated_range"] = [float(v) for v in cal.value.torque_range]
     # -- the residual loop on the same calibration blocks -------------------------------------
     opts = DiscoverOptions(
         n_segments=exp["model"]["n_segments"],
@@ -141,10 +141,10 @@ def held_out(exp, seeds: int) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = discover(train, test, joint, opts)
-    rows["song_discover_start"] = _err(res.baseline_estimate, ref)
-    final_est = res.steps[-1].torque_estimate if res.steps else res.baseline_estimate
+    rows["song_discover_start"] = _err(res.aux.baseline_estimate, ref)
+    final_est = res.aux.steps[-1].torque_estimate if res.aux.steps else res.aux.baseline_estimate
     rows["song_discover_final"] = _err(final_est, ref)
-    rows["song_discover_final"]["effects"] = list(res.effects)
+    rows["song_discover_final"]["effects"] = list(res.aux.effects)
     # -- the network, over several seeds ------------------------------------------------------
     nets = []
     for seed in range(seeds):
@@ -168,7 +168,7 @@ def held_out(exp, seeds: int) -> dict:
         "n_train": train.n_samples,
         "n_test": test.n_samples,
         "reference": ds.reference["description"],
-        "discover_notes": list(res.notes),
+        "discover_notes": list(res.aux.notes),
         "correlation_train": corr,
     }
 

@@ -968,6 +968,53 @@ CASES += [
 ]
 
 
+def _chunked(extra: str = ""):
+    """The run config with `[fit] chunk` (the files streamed) and `extra` lines in `[data]`."""
+
+    def fn(path: Path) -> bytes:
+        text = path.read_text().replace("[data]\n", f"[data]\n{extra}")
+        return (text + "[fit]\nchunk = 64\n").encode()
+
+    return _edit("proj/cfg.toml", fn)
+
+
+CASES += [
+    # streamed parts: the same refusals from the sums of the build pass, never a whole load
+    (
+        "run-chunk-ratio",
+        RUN + ["--out", "o"],
+        _chain(_train_on_ratio_csv, _chunked()),
+        2,
+        None,
+        ["ratio is 160", "--force"],
+    ),
+    (
+        "run-chunk-settle",
+        RUN + ["--out", "o"],
+        _chunked("settle = 100.0\n"),
+        2,
+        None,
+        ["settle = 100 s leaves fewer than 2 samples"],
+    ),
+    (
+        "run-chunk-format",
+        RUN + ["--out", "o"],
+        _chunked('format = "npz"\n'),
+        2,
+        None,
+        ['format = "npz"', "suffix '.csv'"],
+    ),
+    (
+        "sweep-chunk-missing-file",
+        SWEEP + ["--out", "o"],
+        _chain(_chunked(), lambda root: (root / "proj" / "data.csv").unlink()),
+        2,
+        None,
+        ["data.csv", "no such file"],
+    ),
+]
+
+
 def _encoding_in_discover_config(path: Path) -> bytes:
     return path.read_bytes().replace(b"[data]\n", b'[data]\nencoding = "latin-1"\n')
 

@@ -50,7 +50,7 @@ def test_nested_members_equal_separate_fits():
     test_sig, _ = stacked_signals(big, [test])
     torques = batched_estimates(big, fits, test_sig)
     for p, fit, tq in zip(orders, fits, torques):
-        ref = calibrate_lstsq(make(p), (sig, torque)).model
+        ref = calibrate_lstsq(make(p), (sig, torque)).value
         assert fit.model.active == ref.active
         c, r = np.asarray(fit.model.coef), np.asarray(ref.coef)
         assert np.max(np.abs(c - r)) <= 1e-8 * np.max(np.abs(r))

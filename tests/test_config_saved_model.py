@@ -19,7 +19,7 @@ def fitted():
     model = ComplianceModel.paper(
         JOINT, poly_order=3, kinematic="none", per_segment=False, current_scale=10.0
     )
-    return rec, calibrate_lstsq(model, rec).model
+    return rec, calibrate_lstsq(model, rec).value
 
 
 def test_round_trip_compliance_and_network(tmp_path, fitted):

@@ -47,10 +47,15 @@ def _one_line_error(capsys, *words):
     return err
 
 
-def test_contract_report(files, tmp_path):
-    out = tmp_path / "out"
+@pytest.fixture(scope="module")
+def csv_report(files, tmp_path_factory):
+    out = tmp_path_factory.mktemp("discover-csv") / "out"
     assert _run(files, out, "--no-figures") == 0
-    rep = json.loads((out / "report.json").read_text())
+    return json.loads((out / "report.json").read_text())
+
+
+def test_contract_report(files, csv_report):
+    rep = csv_report
     assert set(rep["baseline"]) >= {"rms", "max"}
     assert rep["effects"] == [s["effect"] for s in rep["steps"]]
     assert rep["effects"][0] == "harmonic:theta_m:2"
@@ -63,6 +68,27 @@ def test_contract_report(files, tmp_path):
     err = est - np.asarray(test.torque)
     assert rep["final"]["rms"] == pytest.approx(np.sqrt(np.mean(err**2)), rel=1e-9)
     assert rep["final"]["max"] == pytest.approx(np.max(np.abs(err)), rel=1e-9)
+
+
+def test_parquet_inputs_equal_csv(files, csv_report, tmp_path):
+    # --train/--test read every log format through the same loader as the other commands: the
+    # same logs as Parquet give the CSV run's report (the values round-trip exactly)
+    pytest.importorskip("pyarrow")
+    from hdjax.cli._convert import convert
+
+    for name in ("train", "test"):
+        convert(files / f"{name}.csv", tmp_path / f"{name}.parquet")
+    out = tmp_path / "out"
+    pq = {k: str(tmp_path / f"{k}.parquet") for k in ("train", "test")}  # absolute: files / pq
+    assert _run(files, out, "--no-figures", **pq) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["effects"] == csv_report["effects"]
+    for key in ("baseline", "final"):
+        for m in ("rms", "max"):
+            assert rep[key][m] == pytest.approx(csv_report[key][m], rel=1e-12, abs=0)
+    np.testing.assert_allclose(
+        rep["final_model"]["coef"], csv_report["final_model"]["coef"], rtol=1e-12, atol=0
+    )
 
 
 def test_figures_and_markdown(files, tmp_path):

@@ -37,8 +37,12 @@ def test_names_the_effect_and_reaches_the_true_structure(name):
     train = synthetic_recording(1, effects, n=12000)
     test = synthetic_recording(2, effects, n=6000)
     res = discover(train, test, JOINT, DiscoverOptions(max_effects=2))
-    assert res.effects and res.effects[0] == key, res.final_ranking[:3]
-    step = res.steps[0]
+    assert res.aux.effects and res.aux.effects[0] == key, res.aux.final_ranking[:3]
+    step = res.aux.steps[0]
+    # the solution: the final model as value, the summary numbers as stats
+    assert res.ok and res.stats["n_effects"] == len(res.aux.effects)
+    assert res.value is res.aux.steps[-1].model
+    assert res.stats["final_test_rms"] == res.aux.final.rms
     if name == "hysteresis":
         true = Hysteresis(torque_scale=20.0)
     elif name == "temperature":
@@ -46,15 +50,15 @@ def test_names_the_effect_and_reaches_the_true_structure(name):
         true = ColumnTimesTorque("temperature", float(t.mean()), float(t.std()), 400.0)
     else:
         true = Coulomb("omega_l", omega_s=0.05)
-    assert res.final.rms <= 1.5 * _true_rms(train, test, true)
-    assert res.final.rms < 0.6 * res.baseline.rms
+    assert res.aux.final.rms <= 1.5 * _true_rms(train, test, true)
+    assert res.aux.final.rms < 0.6 * res.aux.baseline.rms
     assert step.cv_gain > 0.3
 
 
 def test_clean_synthetic_adds_nothing():
     res = discover(synthetic_recording(3, [], n=12000), synthetic_recording(4, [], n=6000), JOINT)
-    assert res.effects == []
-    assert any(n.startswith("stopped") for n in res.notes)
+    assert res.aux.effects == []
+    assert any(n.startswith("stopped") for n in res.aux.notes)
 
 
 def test_lara8_config_runs_on_real_data(lara8_dir, tmp_path):

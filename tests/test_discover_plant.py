@@ -152,11 +152,11 @@ def test_loop_names_the_undeclared_effect(data, name):
     train, test = data[name]
     expect, true_terms = CASES[name][3], CASES[name][4]
     res = discover(train, test, JOINT, DiscoverOptions(max_effects=3))
-    print(name, res.effects, res.baseline.rms, [s.test.rms for s in res.steps])
+    print(name, res.aux.effects, res.aux.baseline.rms, [s.test.rms for s in res.aux.steps])
     if isinstance(expect, set):
-        assert set(res.effects[: len(expect)]) == expect
+        assert set(res.aux.effects[: len(expect)]) == expect
     else:
-        assert res.effects and res.effects[0] == expect
+        assert res.aux.effects and res.aux.effects[0] == expect
     if isinstance(true_terms, str):  # a column term, centred and scaled on TRAIN
         x = np.asarray(train.extras["temperature"])
         true_terms = (
@@ -166,11 +166,11 @@ def test_loop_names_the_undeclared_effect(data, name):
         )
     true_terms = true_terms if isinstance(true_terms, tuple) else (true_terms,)
     reference = _true_rms(train, test, true_terms)
-    assert res.final.rms <= 1.5 * reference, (res.final.rms, reference)
-    assert res.final.rms < res.baseline.rms
+    assert res.aux.final.rms <= 1.5 * reference, (res.aux.final.rms, reference)
+    assert res.aux.final.rms < res.aux.baseline.rms
 
 
 def test_clean_case_adds_nothing(data):
     train, test = data["clean"]
     res = discover(train, test, JOINT, DiscoverOptions(max_effects=3))
-    assert res.effects == [], res.final_ranking[:3]
+    assert res.aux.effects == [], res.aux.final_ranking[:3]

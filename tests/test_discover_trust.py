@@ -65,7 +65,7 @@ def test_at_most_one_false_discovery_in_20_clean_joints():
     for rec in recs:
         train, test = _split(rec)
         res = discover(train, test, JOINT, OPTIONS)
-        added.append(res.effects)
+        added.append(res.aux.effects)
     print("effects added per clean joint:", added)
     assert sum(bool(a) for a in added) <= 1, added
 
@@ -112,10 +112,10 @@ def test_hysteresis_reaches_the_true_structure(name):
         x = np.asarray(train.extras["temperature"])
         terms.append(ColumnTimesTorque("temperature", float(x.mean()), float(x.std()), RATED))
     true = refit_structure(train, test, JOINT, terms, OPTIONS)
-    print(name, res.effects, res.baseline.rms, res.final.rms, true.rms)
-    assert "hysteresis:torque" in res.effects
-    assert res.final.rms <= 1.5 * true.rms, (res.final.rms, true.rms)
-    cv = [res.baseline_cv_torque_rms] + [s.cv_torque_rms for s in res.steps]
+    print(name, res.aux.effects, res.aux.baseline.rms, res.aux.final.rms, true.rms)
+    assert "hysteresis:torque" in res.aux.effects
+    assert res.aux.final.rms <= 1.5 * true.rms, (res.aux.final.rms, true.rms)
+    cv = [res.aux.baseline_cv_torque_rms] + [s.cv_torque_rms for s in res.aux.steps]
     assert all(b < a for a, b in zip(cv, cv[1:])), "an accepted step never raises the CV error"
 
 

@@ -103,8 +103,8 @@ def test_getting_started_python_runs_as_written(monkeypatch):
     result = namespace["result"]
     # the example logs carry an order-2 kinematic error of the motor angle, and nothing else
     # that the starting model lacks: the loop must name it first and lower the TEST error
-    assert result.effects[0].startswith("harmonic:theta_m:2")
-    assert result.final.rms < 0.5 * result.baseline.rms
+    assert result.aux.effects[0].startswith("harmonic:theta_m:2")
+    assert result.stats["final_test_rms"] < 0.5 * result.stats["baseline_test_rms"]
     assert namespace["est"].torque.shape == namespace["test"].torque.shape
 
 

@@ -129,13 +129,13 @@ def test_toy_family_simulate_discover_save_load_estimate(toy, recordings, tmp_pa
         max_effects=1, library=LibraryOptions(families=("drag:omega_l", "viscous:omega_l"))
     )
     res = discover(train, test, JOINT, options)
-    print(res.effects, res.baseline.rms, res.final.rms, res.final_ranking[:2])
-    assert res.effects == ["drag:omega_l"]
-    assert res.final.rms < 0.7 * res.baseline.rms
+    print(res.aux.effects, res.aux.baseline.rms, res.aux.final.rms, res.aux.final_ranking[:2])
+    assert res.aux.effects == ["drag:omega_l"]
+    assert res.aux.final.rms < 0.7 * res.aux.baseline.rms
     report = json.loads(json.dumps(report_dict(res)))
     assert "drag:omega_l" in report["vocabulary"]
     # save -> load: the toy term round-trips through the registry's type table
-    model = res.final_model
+    model = res.value
     path = save_model(tmp_path / "model.json", JOINT, compliance=model)
     loaded = load_model(path).compliance
     assert isinstance(loaded, ComplianceModel)
@@ -148,7 +148,7 @@ def test_toy_family_simulate_discover_save_load_estimate(toy, recordings, tmp_pa
     t_fitted = np.asarray(estimate_torque(model, test).torque)
     np.testing.assert_array_equal(t_loaded, t_fitted)
     rms = float(np.sqrt(np.mean((t_loaded - np.asarray(test.torque)) ** 2)))
-    assert rms == pytest.approx(res.final.rms, rel=1e-9)
+    assert rms == pytest.approx(res.aux.final.rms, rel=1e-9)
 
 
 def test_unregistered_term_type_is_refused_with_a_message(toy, tmp_path):
@@ -192,6 +192,8 @@ def _all_terms(rated):
         effects.Harmonics("theta_m", (1.0, 2.5)),
         effects.Harmonics("theta_l", (3.0,)),
         effects.Coulomb("omega_l", 0.05),
+        effects.Stribeck("omega_m", 0.5, 2.0),
+        effects.Ripple("theta_m", 2.0, rated),
         effects.Viscous("omega_m", 2.0),
         effects.Hysteresis(0.05 * rated),
         effects.TwistHysteresis(0.05 * rated, 1.5e-5),

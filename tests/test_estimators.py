@@ -23,7 +23,7 @@ def rec():
 
 def test_estimators_return_what_their_functions_return(rec):
     structure = hc.ComplianceModel.paper(JOINT, n_segments=1, per_segment=False, kinematic="none")
-    model = hc.calibrate_lstsq(structure, rec).model
+    model = hc.calibrate_lstsq(structure, rec).value
     feats = hn.build_features(rec, JOINT)
     net = hn.Network(feats.layout, (4,), key=jax.random.key(0))
     inputs = fit.hybrid_inputs(rec, JOINT, compliance=model, twist_rate=True)

@@ -27,7 +27,7 @@ def problem():
     )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        closed = hc.calibrate_lstsq(model, rec).model
+        closed = hc.calibrate_lstsq(model, rec).value
     prob = fit.linear_problem(model, rec)
     return rec, model, closed, prob
 
@@ -45,14 +45,15 @@ def test_closed_form_agrees_with_numpy(problem):
 def test_gradient_reaches_closed_form(problem, method):
     rec, model, closed, prob = problem
     res = fit.fit_compliance_gradient(model, rec, method=method, steps=4000)
-    c, c_star = np.asarray(res.model.coef), np.asarray(closed.coef)
+    c, c_star = np.asarray(res.value.coef), np.asarray(closed.coef)
     u, u_star = np.asarray(prob.to_u(c)), np.asarray(prob.to_u(c_star))
     loss_star = float(prob.loss(prob.to_u(c_star)))
     # Coefficients within 1e-6 relative (norm-wise, and each scaled coefficient against the
     # largest), loss within 1e-9 relative: the thresholds, float64.
     assert np.linalg.norm(c - c_star) / np.linalg.norm(c_star) < 1e-6
     assert np.max(np.abs(u - u_star)) / np.max(np.abs(u_star)) < 1e-6
-    assert abs(res.loss - loss_star) / loss_star < 1e-9
+    assert abs(res.stats["loss"] - loss_star) / loss_star < 1e-9
+    assert res.ok and res.stats["method"] == method and res.stats["steps"] <= 4000
 
 
 def test_unknown_method(problem):

@@ -23,7 +23,7 @@ def setup():
     )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ls = hc.calibrate_lstsq(structure, rec).model
+        ls = hc.calibrate_lstsq(structure, rec).value
     inp = fit.hybrid_inputs(rec, JOINT, compliance=ls)
     return rec, ls, inp
 
@@ -53,16 +53,16 @@ def test_joint_fit_reduces_the_loss(setup, variant):
     res = fit.fit_hybrid(
         model, inp, steps=1000, learning_rate=1e-2, batch_size=256, key=jax.random.key(1)
     )
-    after = _loss(res.model, inp)
+    after = _loss(res.value, inp)
     # (a) starts from a zero network (predicts the mean torque): must fall far below the
     # torque variance; (b), (c) start at least squares and must improve on it.
     assert after < (0.05 if variant == "a" else 0.8) * before, (before, after)
     if variant == "c":
         # The plant parameters moved (they are fitted jointly) and stayed finite.
-        assert np.all(np.isfinite(res.model.plant_log))
-        assert np.max(np.abs(res.model.plant_log)) > 1e-4
+        assert np.all(np.isfinite(res.value.plant_log))
+        assert np.max(np.abs(res.value.plant_log)) > 1e-4
     if variant != "a":
-        assert np.max(np.abs(res.model.coef_delta)) > 0.0
+        assert np.max(np.abs(res.value.coef_delta)) > 0.0
 
 
 def test_levenberg_marquardt_on_hybrid(setup):
@@ -71,7 +71,7 @@ def test_levenberg_marquardt_on_hybrid(setup):
     model = fit.make_hybrid(sub, compliance=ls, hidden=(3,), key=jax.random.key(0))
     before = _loss(model, sub)
     res = fit.fit_hybrid(model, sub, method="levenberg_marquardt", steps=15, key=jax.random.key(0))
-    assert _loss(res.model, sub) < 0.8 * before
+    assert _loss(res.value, sub) < 0.8 * before
 
 
 def test_plant_gradient_matches_finite_difference(setup):

@@ -61,7 +61,7 @@ def test_fleet_two_workers_one_broken_and_resume(tmp_path, capsys):
     model = ComplianceModel.paper(
         joint, current_scale=float(np.max(np.abs(np.asarray(rec.current)))), fourier_order=1
     )
-    ref = calibrate_lstsq(model, rec).model
+    ref = calibrate_lstsq(model, rec).value
     for name, value in zip(ref.term_names, np.asarray(ref.coef)):
         np.testing.assert_allclose(row[f"coef:{name}"], value, rtol=1e-12, atol=1e-300)
     assert row["n_samples"] == 1500 and row["twist_rms_arcsec"] > 0

@@ -171,7 +171,7 @@ def test_estimate_from_recording_ignores_its_torque():
 
     rec = sim_recording(400)
     model = ComplianceModel.paper(JOINT, per_segment=False, poly_order=1, kinematic="none")
-    model = calibrate_lstsq(model, rec).model
+    model = calibrate_lstsq(model, rec).value
     est = estimate_torque(model, rec)
     est2 = estimate_torque(model, rec.with_torque(np.zeros(rec.n_samples)))
     np.testing.assert_array_equal(np.asarray(est.torque), np.asarray(est2.torque))

@@ -77,14 +77,16 @@ def test_shared_calibration_reports_the_unreached_segment(lara8):
         res = calibrate_lstsq(model, rec)
     assert any("left out" in str(w.message) for w in caught)
     # tau0 = 150 N·m: knots at +-50, +-100; nothing below -100 N·m
-    assert res.dropped == ("k3 (no sample reaches torque segment 0)",)
-    assert res.segment_counts[0] == 0 and all(c > 50 for c in res.segment_counts[1:])
-    k_arcsec = np.asarray(res.model.k)[1:] * ARCSEC
-    print("segment compliances [arcsec/N·m]", k_arcsec, "residual", res.residual_rms * ARCSEC)
+    assert res.stats["dropped"] == ("k3 (no sample reaches torque segment 0)",)
+    counts = res.stats["segment_counts"]
+    assert counts[0] == 0 and all(c > 50 for c in counts[1:])
+    k_arcsec = np.asarray(res.value.k)[1:] * ARCSEC
+    print("segment compliances [arcsec/N·m]", k_arcsec, "residual",
+          res.stats["residual_rms"] * ARCSEC)  # fmt: skip
     assert np.all(k_arcsec > 0)  # invertible with twist_sign = -1
-    lo, hi = res.model.torque_range
+    lo, hi = res.value.torque_range
     assert lo == pytest.approx(float(rec.torque.min())) and hi == pytest.approx(122.705)
-    est = estimate_torque(res.model, rec)
+    est = estimate_torque(res.value, rec)
     err = hdjax.error_metrics(est.torque, rec.torque, joint.rated_torque)
     print("in-sample", err.as_dict())
     assert err.rms_pct < 10.0  # a shared 4-segment model explains most of the twist

@@ -9,7 +9,12 @@ import numpy as np
 import pytest
 
 import hdjax
-from hdjax.compliance import ComplianceModel, _lstsq as lstsq_mod, calibrate_lstsq
+from hdjax.compliance import (
+    ComplianceModel,
+    _lstsq as lstsq_mod,
+    calibrate_lstsq,
+    calibration_messages,
+)
 from tests.helpers import JOINT, make_signals, numpy_design, simulate
 
 CASES = {
@@ -33,11 +38,12 @@ def noisy_case():
 def test_recovers_truth_on_exact_data(exact_case):
     print("seed", exact_case.seed)
     res = calibrate_lstsq(exact_case.model, (exact_case.sig, exact_case.torque))
-    assert res.rank == res.n_terms == exact_case.model.n_coef and not res.dropped
+    assert res.stats["rank"] == res.stats["n_terms"] == exact_case.model.n_coef
+    assert not res.stats["dropped"]
     # noise-free float64 data, scaled condition ~70: the coefficients are recovered to ~1e-13
     scale = np.abs(exact_case.truth).max()
-    np.testing.assert_allclose(np.asarray(res.model.coef), exact_case.truth, atol=1e-11 * scale)
-    assert res.residual_rms < 1e-15
+    np.testing.assert_allclose(np.asarray(res.value.coef), exact_case.truth, atol=1e-11 * scale)
+    assert res.stats["residual_rms"] < 1e-15
 
 
 def test_matches_numpy_lstsq_on_noisy_data(noisy_case):
@@ -47,25 +53,47 @@ def test_matches_numpy_lstsq_on_noisy_data(noisy_case):
     ref, *_ = np.linalg.lstsq(A, np.asarray(c.sig.twist), rcond=None)
     # two backward-stable solvers on a design of scaled condition ~70: agree to ~1e-12 relative
     np.testing.assert_allclose(
-        np.asarray(res.model.coef), ref, rtol=0, atol=1e-10 * np.abs(ref).max()
+        np.asarray(res.value.coef), ref, rtol=0, atol=1e-10 * np.abs(ref).max()
     )
     resid = A @ ref - np.asarray(c.sig.twist)
-    assert res.residual_rms == pytest.approx(np.sqrt(np.mean(resid**2)), rel=1e-10)
+    assert res.stats["residual_rms"] == pytest.approx(np.sqrt(np.mean(resid**2)), rel=1e-10)
     # the noise is recovered as the residual (p/n = 3 % of it is absorbed)
-    assert res.residual_rms == pytest.approx(5e-7, rel=0.05)
+    assert res.stats["residual_rms"] == pytest.approx(5e-7, rel=0.05)
     # condition number of the column-scaled design, as numpy computes it
     As = A / np.linalg.norm(A, axis=0)
-    assert res.condition == pytest.approx(np.linalg.cond(As), rel=1e-6)
+    assert res.stats["condition"] == pytest.approx(np.linalg.cond(As), rel=1e-6)
 
 
-def test_qr_fallback_agrees_with_semi_normal_equations(noisy_case, monkeypatch):
-    c = noisy_case
-    fast = calibrate_lstsq(c.model, (c.sig, c.torque))
+def test_qr_path_with_an_unreached_segment_ahead_of_calibrated_ones(monkeypatch):
+    """The Householder QR fallback agrees with the semi-normal equations and numpy.linalg.lstsq,
+    with inactive columns (segment 0 is never reached: its hinge and its own block) ahead of the
+    active ones. The QR path must solve the active design alone: its Householder step on a
+    zeroed column would otherwise leave part of the later columns' factor in a row of R that is
+    then dropped."""
+    sig, torque = make_signals(3000, seed=11)
+    torque = jnp.asarray(np.clip(np.asarray(torque), -50.0, 85.0))  # nothing below -60 N·m
+    truth = simulate("x", 10, per_segment=True, seed=11)
+    model = eqx.tree_at(lambda m: m.coef, truth.model, jnp.asarray(truth.truth))
+    noise = 5e-7 * np.random.default_rng(3).standard_normal(3000)
+    twist = np.asarray(model.predict_twist(sig, torque)) + noise
+    sig = eqx.tree_at(lambda s: s.twist, sig, jnp.asarray(twist))
+    with pytest.warns(UserWarning, match="left out"):
+        fast = calibrate_lstsq(model, (sig, torque))
     monkeypatch.setattr(lstsq_mod, "CSNE_MAX_COND", 1.0)  # force the Householder QR path
-    slow = calibrate_lstsq(c.model, (c.sig, c.torque))
-    ref = np.asarray(slow.model.coef)
-    np.testing.assert_allclose(np.asarray(fast.model.coef), ref, atol=1e-10 * np.abs(ref).max())
-    assert fast.condition == pytest.approx(slow.condition, rel=1e-6)
+    with pytest.warns(UserWarning, match="left out"):
+        slow = calibrate_lstsq(model, (sig, torque))
+    active = np.asarray(slow.value.active)
+    assert not active[0] and active[1:5].all() and slow.ok
+    A = numpy_design(model, sig, torque)
+    ref = np.zeros(A.shape[1])
+    ref[active] = np.linalg.lstsq(A[:, active], twist, rcond=None)[0]
+    # both paths are backward stable on a design of scaled condition ~100: ~1e-13 relative
+    # (the column-dropping bug gave 1e-4 on a shared model)
+    for res in (slow, fast):
+        np.testing.assert_allclose(
+            np.asarray(res.value.coef), ref, rtol=0, atol=1e-10 * np.abs(ref).max()
+        )
+    assert slow.stats["condition"] == pytest.approx(fast.stats["condition"], rel=1e-6)
 
 
 def test_calibrates_from_a_recording():
@@ -75,8 +103,8 @@ def test_calibrates_from_a_recording():
     model = ComplianceModel.paper(JOINT, per_segment=False, poly_order=1, kinematic="none")
     res = calibrate_lstsq(model, rec)
     # the simulated twist is exactly 3e-5 rad per N·m in every segment (torque +-80 N·m)
-    np.testing.assert_allclose(np.asarray(res.model.k), 3e-5, rtol=1e-6)
-    assert res.model.torque_range == pytest.approx(
+    np.testing.assert_allclose(np.asarray(res.value.k), 3e-5, rtol=1e-6)
+    assert res.value.torque_range == pytest.approx(
         (float(rec.torque.min()), float(rec.torque.max()))
     )
 
@@ -91,12 +119,13 @@ def test_unreached_segments_are_dropped_and_range_narrowed():
     sig = eqx.tree_at(lambda s: s.twist, sig, twist)
     with pytest.warns(UserWarning, match="left out"):
         res = calibrate_lstsq(model, (sig, torque))
-    assert any(d.startswith("k3 (no sample reaches torque segment 0)") for d in res.dropped)
-    assert not any(res.model.active[5 : 5 + 19])  # segment 0's own block is left out too
-    assert res.segment_counts[0] == 0 and sum(res.segment_counts) == 2000
-    assert res.model.torque_range == pytest.approx((-50.0, 85.0))
-    assert not res.model.active[0] and float(res.model.coef[0]) == 0.0
-    np.testing.assert_allclose(np.asarray(res.model.k)[1:], truth_case.truth[1:5], rtol=1e-9)
+    dropped = res.stats["dropped"]
+    assert any(d.startswith("k3 (no sample reaches torque segment 0)") for d in dropped)
+    assert not any(res.value.active[5 : 5 + 19])  # segment 0's own block is left out too
+    assert res.stats["segment_counts"][0] == 0 and sum(res.stats["segment_counts"]) == 2000
+    assert res.value.torque_range == pytest.approx((-50.0, 85.0))
+    assert not res.value.active[0] and float(res.value.coef[0]) == 0.0
+    np.testing.assert_allclose(np.asarray(res.value.k)[1:], truth_case.truth[1:5], rtol=1e-9)
 
 
 # ------------------------------------------------------------------------------------------
@@ -116,7 +145,11 @@ def test_constant_current_names_the_polynomial_terms():
         assert name in msg
     assert "constant current" in msg and "add load variation" in msg
     res = calibrate_lstsq(model, (sig, torque), throw=False)
-    assert res.rank < res.n_terms and any("rank-deficient" in m for m in res.messages)
+    assert res.result == hdjax.RESULTS.rank_deficient and not res.ok
+    assert res.stats["rank"] == 6 and res.stats["n_terms"] == 9
+    assert any({"k0", "w1"} <= set(g) for g in res.stats["collinear"])
+    assert "add load variation" in res.message  # the result's own actionable message
+    assert calibration_messages(res) == [msg]  # the raised error's text, nothing left out
 
 
 def test_fewer_samples_than_coefficients():
@@ -133,6 +166,9 @@ def test_falling_twist_is_not_invertible_and_suggests_twist_sign():
         calibrate_lstsq(c.model, (sig, c.torque))
     msg = str(err.value)
     assert "not increasing with torque" in msg and "twist_sign = -1" in msg and "k1=" in msg
+    res = calibrate_lstsq(c.model, (sig, c.torque), throw=False)
+    assert res.result == hdjax.RESULTS.twist_reversed and "twist_sign = -1" in res.message
+    assert calibration_messages(res) == [msg]
 
 
 def test_recording_without_torque_is_refused():

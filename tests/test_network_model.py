@@ -119,30 +119,31 @@ def trained(data):
 def test_backprop_reaches_error_target(trained, data):
     bp, _ = trained
     rec, feats = data
-    assert bp.stopped == "target"
-    assert float(bp.history[-1]) <= 2e-4
+    assert bp.ok and bp.stats["target_reached"]
+    assert float(bp.stats["history"][-1]) <= 2e-4
     # E (eq. (42)) on the standardised torque -> RMS in N·m: sqrt(2E) * std(torque).
-    est = hn.predict(bp.network, feats)
+    est = hn.predict(bp.value, feats)
     rms = float(np.sqrt(np.mean((np.asarray(est)[:2000] - np.asarray(rec.torque)[:2000]) ** 2)))
-    assert rms == pytest.approx(np.sqrt(2 * float(bp.history[-1])) * float(bp.network.y_scale))
+    e_final = float(bp.stats["history"][-1])
+    assert rms == pytest.approx(np.sqrt(2 * e_final) * float(bp.value.y_scale))
 
 
 def test_optax_reaches_validation_target(trained, data):
     _, opt = trained
     rec, _ = data
-    assert opt.stopped == "target"
-    assert float(opt.val_rmse[-1]) <= 2.0
+    assert opt.ok and opt.stats["target_reached"]
+    assert float(opt.stats["val_rmse"][-1]) <= 2.0
     # Independent check of the reported validation error from the recording.
-    est = np.asarray(hn.predict_torque(opt.network, rec, JOINT))
+    est = np.asarray(hn.predict_torque(opt.value, rec, JOINT))
     val = np.arange(est.size) % 3 == 2
     err = est[val] - np.asarray(rec.torque)[val]
-    assert np.sqrt(np.mean(err**2)) == pytest.approx(float(opt.val_rmse[-1]), rel=1e-9)
+    assert np.sqrt(np.mean(err**2)) == pytest.approx(float(opt.stats["val_rmse"][-1]), rel=1e-9)
 
 
 def test_predict_does_not_recompile(trained, data):
     _, opt = trained
     _, feats = data
-    hn.predict(opt.network, feats)
+    hn.predict(opt.value, feats)
     with jax.log_compiles():
         import logging
 
@@ -151,7 +152,7 @@ def test_predict_does_not_recompile(trained, data):
         handler.emit = records.append
         logging.getLogger("jax").addHandler(handler)
         try:
-            hn.predict(opt.network, feats).block_until_ready()
+            hn.predict(opt.value, feats).block_until_ready()
         finally:
             logging.getLogger("jax").removeHandler(handler)
     assert not [r for r in records if "Compiling" in r.getMessage()]
@@ -229,7 +230,7 @@ def test_estimation_with_other_layout_is_refused(trained, data):
     rec, _ = data
     periodic = hn.build_features(rec, JOINT, periodic=True)
     with pytest.raises(hdjax.ModelMismatchError, match="trained on .*current.*theta_m"):
-        hn.predict(opt.network, periodic)
+        hn.predict(opt.value, periodic)
     filtered = hn.build_features(rec, JOINT, kalman=True)
     with pytest.raises(hdjax.ModelMismatchError, match="kalman=True"):
-        hn.predict(opt.network, filtered)
+        hn.predict(opt.value, filtered)

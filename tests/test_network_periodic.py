@@ -39,7 +39,7 @@ def held_out_rms():
         res = hn.train_optax(
             net, feats.x, train.torque, learning_rate=1e-2, steps=3000, key=jax.random.key(1)
         )
-        err = np.asarray(hn.predict_torque(res.network, test, JOINT)) - np.asarray(test.torque)
+        err = np.asarray(hn.predict_torque(res.value, test, JOINT)) - np.asarray(test.torque)
         out[periodic] = float(np.sqrt(np.mean(err**2)))
         print(f"periodic={periodic}: held-out RMS {out[periodic]:.2f} N·m")
     return out, float(np.sqrt(np.mean(kin_torque**2)))

@@ -85,9 +85,12 @@ def test_levenberg_marquardt_recovers_parameters(hashimoto_recording):
     )
     truth = [plant._identify._getter(n)(true) for n in names]
     # noiseless data from the same model: recovered to 1e-6 relative
-    for got, want in zip(fit.values, truth):
+    for got, want in zip(fit.stats["values"], truth):
         assert float(got) == pytest.approx(float(want), rel=1e-6)
-    assert float(fit.loss) < 1e-12
+    assert float(fit.stats["loss"]) < 1e-12 and fit.ok
+    # the fitted PlantParams carry the same values
+    got = [plant._identify._getter(n)(fit.value) for n in names]
+    np.testing.assert_allclose(np.asarray(got, float), np.asarray(fit.stats["values"], float))
 
 
 def test_adam_recovers_stiffness_and_inertia(hashimoto_recording):
@@ -106,7 +109,7 @@ def test_adam_recovers_stiffness_and_inertia(hashimoto_recording):
     )
     truth = [plant._identify._getter(n)(true) for n in names]
     # first-order optimiser, 60 steps from 10 % off: within 1 %
-    for got, want in zip(fit.values, truth):
+    for got, want in zip(fit.stats["values"], truth):
         assert float(got) == pytest.approx(float(want), rel=1e-2)
 
 

@@ -17,7 +17,7 @@ def case():
 
 @pytest.fixture(scope="session")
 def batch(case):
-    return np.asarray(calibrate_lstsq(case.model, (case.sig, case.torque)).model.coef)
+    return np.asarray(calibrate_lstsq(case.model, (case.sig, case.torque)).value.coef)
 
 
 def rel_err(x, ref):
@@ -29,18 +29,18 @@ def test_matches_batch_least_squares(case, batch, block_size):
     print("seed", case.seed)
     res = calibrate_rls(case.model, (case.sig, case.torque), block_size=block_size)
     # the bar: 1e-8 relative on well-conditioned float64 data
-    assert rel_err(res.model.coef, batch) < 1e-8
-    assert res.rank == res.n_terms == case.model.n_coef
+    assert rel_err(res.value.coef, batch) < 1e-8
+    assert res.stats["rank"] == res.stats["n_terms"] == case.model.n_coef
 
 
 def test_per_segment_block_matches_batch():
     c = simulate(
         "rls-seg", 1500, per_segment=True, noise=5e-7, seed=22, poly_order=2, fourier_order=1
     )
-    ref = np.asarray(calibrate_lstsq(c.model, (c.sig, c.torque)).model.coef)
+    ref = np.asarray(calibrate_lstsq(c.model, (c.sig, c.torque)).value.coef)
     # init block must reach every segment (the data are shuffled in torque, so 2p rows do)
     res = calibrate_rls(c.model, (c.sig, c.torque), block_size=32)
-    assert rel_err(res.model.coef, ref) < 1e-8
+    assert rel_err(res.value.coef, ref) < 1e-8
 
 
 def _random_problem(n=600, p=6, seed=0):

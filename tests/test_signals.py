@@ -57,7 +57,7 @@ def test_calibration_and_inversion_follow_the_sign(recordings):
             harmonic_orders_l=(),
             current_scale=10.0,
         )
-        model = hc.calibrate_lstsq(structure, data).model
+        model = hc.calibrate_lstsq(structure, data).value
         assert model.joint == joint
         est[name] = np.asarray(hc.estimate_torque(model, data).torque)
     # the same column space (cos even, sin odd in the angle, current unchanged): the same fit

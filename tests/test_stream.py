@@ -33,13 +33,13 @@ def model_of(velocity="difference", hysteresis=False):
 
 def assert_same_fit(a, b, rtol=1e-9):
     # 1e-9 relative: both solve the same scaled problem to ~cond * eps ~ 1e-10 (cond ~ 5e5)
-    ca, cb = np.asarray(a.model.coef), np.asarray(b.model.coef)
+    ca, cb = np.asarray(a.value.coef), np.asarray(b.value.coef)
     np.testing.assert_allclose(cb, ca, rtol=0, atol=rtol * np.max(np.abs(ca)))
-    assert (a.rank, a.n_terms, a.n_samples) == (b.rank, b.n_terms, b.n_samples)
-    assert a.segment_counts == b.segment_counts and a.dropped == b.dropped
-    assert a.model.active == b.model.active and a.model.torque_range == b.model.torque_range
-    np.testing.assert_allclose(b.residual_rms, a.residual_rms, rtol=1e-9)
-    np.testing.assert_allclose(b.condition, a.condition, rtol=1e-4)
+    for key in ("rank", "n_terms", "n_samples", "segment_counts", "dropped"):
+        assert a.stats[key] == b.stats[key], key
+    assert a.value.active == b.value.active and a.value.torque_range == b.value.torque_range
+    np.testing.assert_allclose(b.stats["residual_rms"], a.stats["residual_rms"], rtol=1e-9)
+    np.testing.assert_allclose(b.stats["condition"], a.stats["condition"], rtol=1e-4)
 
 
 @pytest.mark.parametrize(
@@ -61,7 +61,7 @@ def test_well_conditioned_stream_reads_once(recs, monkeypatch):
     m = ComplianceModel.paper(JOINT, current_scale=1.0, poly_order=1, kinematic="none",
                               per_segment=False)  # fmt: skip
     mem = calibrate_lstsq(m, stacked_signals(m, recs))
-    assert mem.condition < S.REFINE_ABOVE_COND
+    assert mem.stats["condition"] < S.REFINE_ABOVE_COND
     passes = []
     real = S._passes
     monkeypatch.setattr(S, "_passes", lambda *a: passes.append(1) or real(*a))
@@ -94,7 +94,7 @@ def test_stream_from_parquet_and_config_chunk(recs, tmp_path):
     m = model_of()
     ref = calibrate_stream(m, RecordingStream.from_recordings(recs, 512), chunk=512)
     files = calibrate_stream(m, RecordingStream.from_files(paths, chunk=512), chunk=512)
-    np.testing.assert_array_equal(np.asarray(files.model.coef), np.asarray(ref.model.coef))
+    np.testing.assert_array_equal(np.asarray(files.value.coef), np.asarray(ref.value.coef))
     # 4000 = 3 * 1333 + 1: the file's one-row tail is folded into a longer last chunk
     tail = calibrate_stream(m, RecordingStream.from_files(paths, chunk=1333), chunk=1333)
     assert_same_fit(calibrate_lstsq(m, stacked_signals(m, recs)), tail)
@@ -106,7 +106,7 @@ def test_stream_from_parquet_and_config_chunk(recs, tmp_path):
         {"joint": JOINT.to_dict(), "data": {"kind": "synthetic"}, "fit": {"chunk": 512}}
     )
     via_cfg = calibrate(exp, m, recs)
-    np.testing.assert_array_equal(np.asarray(via_cfg.model.coef), np.asarray(ref.model.coef))
+    np.testing.assert_array_equal(np.asarray(via_cfg.value.coef), np.asarray(ref.value.coef))
     with pytest.raises(hdjax.ConfigError, match="chunk = 512 streams"):
         experiment_from_dict({"joint": JOINT.to_dict(), "fit": {"chunk": 512, "method": "rls"}})
 

@@ -75,7 +75,7 @@ def bench_sweep(n_samples: int, repeats: int, progress=None) -> dict:
     data = (sig, torque)
 
     def fit_single():
-        return calibrate_lstsq(single, data).model.coef.block_until_ready()
+        return calibrate_lstsq(single, data).value.coef.block_until_ready()
 
     def fit_sweep():
         fits, _ = nested_fit(big, members, sig, torque)
@@ -92,7 +92,7 @@ def bench_sweep(n_samples: int, repeats: int, progress=None) -> dict:
     sweep_first = time.perf_counter() - t0
     sweep_s = min(timeit.repeat(fit_sweep, number=1, repeat=repeats))
     say("timing the estimate of 100 samples")
-    model = calibrate_lstsq(single, data).model
+    model = calibrate_lstsq(single, data).value
     rec100 = rec.select(slice(0, 100))
     est = lambda: jax.block_until_ready(estimate_torque(model, rec100).torque)
     t0 = time.perf_counter()

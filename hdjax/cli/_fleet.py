@@ -22,7 +22,8 @@ example:
   hdjax fleet cell.toml --out runs/cell --scheduler tcp://10.0.0.5:8786
 
 Each (joint, log) pair is one task on a Dask cluster: by default a local cluster with one
-single-threaded worker process per core, or the existing cluster at --scheduler. Results stream
+single-threaded worker process per core, each bound to its own core (--no-pin: not bound), or
+the existing cluster at --scheduler; the longest logs start first. Results stream
 into OUT.partial/ as tasks finish (tasks/*.json and results.parquet, a row per joint-log); OUT
 appears when all tasks have run, with results.parquet, report.md and figures/drift_JOINT.png.
 Finished tasks are skipped when the command is run again (after an interruption, or with
@@ -32,7 +33,8 @@ error and does not stop the others. Exit code 0 when every task succeeded, 1 whe
 
 WORKER_ENV = {
     # one core per worker: XLA, OpenMP and BLAS would otherwise each start a thread per core
-    "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
+    # (XLA has no flag for its other threads, JAX's dispatch and XLA's compiler; see _pin)
+    "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false",
     "OMP_NUM_THREADS": "1",
     "OPENBLAS_NUM_THREADS": "1",
     "MKL_NUM_THREADS": "1",
@@ -49,6 +51,11 @@ def add_parser(sub) -> None:
     )
     p.add_argument("--overwrite", action="store_true", help="replace an earlier fleet result")
     p.add_argument("--fresh", action="store_true", help="rerun tasks that finished before")
+    p.add_argument(
+        "--no-pin",
+        action="store_true",
+        help="do not bind each worker of the local cluster to its own core",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar on stderr")
 
 
@@ -108,7 +115,38 @@ def _client(args, n_tasks: int):
         silence_logs=logging.ERROR,
         env=WORKER_ENV,
     )
-    return Client(cluster), cluster
+    client = Client(cluster)
+    if not args.no_pin:
+        _pin(client)
+    return client, cluster
+
+
+def _pin_process(core: int) -> int:
+    """Bind every thread of this process (and so the threads it starts) to `core`."""
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            os.sched_setaffinity(int(tid), {core})
+        except OSError:  # a thread that ended meanwhile
+            pass
+    return core
+
+
+def _pin(client) -> None:
+    """One core per local worker: worker i on the i-th core this process may use.
+
+    A single-threaded worker still runs JAX's dispatch and XLA's compiler threads beside its
+    task; unbound, one worker spreads over more than one core, and two workers on two cores
+    crowd each other. Bound, every worker has one core whatever the number of workers.
+    Skipped where the system cannot bind threads or there are more workers than cores.
+    """
+    if not hasattr(os, "sched_setaffinity") or not os.path.isdir("/proc/self/task"):
+        return
+    cores = sorted(os.sched_getaffinity(0))
+    workers = sorted(client.scheduler_info().get("workers", {}))
+    if len(workers) > len(cores):
+        return
+    for core, addr in zip(cores, workers):
+        client.run(_pin_process, core, workers=[addr])
 
 
 def _cached(folder: Path, task_id: str) -> dict | None:
@@ -191,8 +229,17 @@ def _run(client, todo, rows, rd, bar, cache_dir, run_task, write_table) -> int:
     as_completed = dask_distributed().as_completed
 
     futures = {}
-    for t in todo:
-        fut = client.submit(run_task, t.spec, cache_dir, key=f"hdjax-fleet-{t.task_id}", pure=False)
+    # longest first (by log size): a long task started last would leave the other workers
+    # idle at the end; the priority keeps that order in the scheduler's queue
+    for rank, t in enumerate(sorted(todo, key=_log_size, reverse=True)):
+        fut = client.submit(
+            run_task,
+            t.spec,
+            cache_dir,
+            key=f"hdjax-fleet-{t.task_id}",
+            pure=False,
+            priority=len(todo) - rank,
+        )
         futures[fut] = t
     done = failed = 0
     bar(len(rows), min(len(todo), _n_workers(client)), 0)
@@ -216,6 +263,13 @@ def _run(client, todo, rows, rd, bar, cache_dir, run_task, write_table) -> int:
             last_table = time.monotonic()
         bar(len(rows), _running(client, futures), failed)
     return failed
+
+
+def _log_size(task) -> int:
+    try:
+        return Path(task.log).stat().st_size
+    except OSError:  # a missing log fails in its task, with its one-line error
+        return 0
 
 
 def _n_workers(client) -> int:

@@ -8,7 +8,7 @@ from pathlib import Path
 # compliance.estimate_torque is looked up at each call (a test stops the command there)
 from .. import compliance
 from .._errors import InversionError
-from ..compliance import check_invertible
+from ..compliance import calibration_messages, check_invertible
 from ..config import (
     build_dataset,
     dumps_toml,
@@ -100,35 +100,36 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
     notes: list[str] = []
     cal = P.calibrate(cfg, model0, ds.train, warn=notes.append)
     fit_s = time.perf_counter() - t0
-    not_invertible = check_invertible(cal.model)
+    not_invertible = check_invertible(cal.value)
     if not_invertible:  # one line: the estimate would fail on it, so say it once, as the error
         cause = f" Likely cause (run with --force): {forced}" if forced else ""
         raise InversionError(f"{not_invertible}{cause}")
     if forced:
         progress.warn(f"{forced} (--force: running anyway; the results may be wrong)")
-    for msg in notes + list(cal.messages):
+    messages = calibration_messages(cal)
+    for msg in notes + messages:
         progress.warn(msg)
     progress("estimating torque with the model (eqs. 26-27)")
-    est_m = P.estimate_model(cal.model, ds.test)
+    est_m = P.estimate_model(cal.value, ds.test)
     metrics["model"] = {
         "calibration": {
             "method": cfg["fit"]["method"],
-            "n_terms": cal.n_terms,
-            "rank": cal.rank,
-            "condition": cal.condition,
-            "residual_rms_arcsec": cal.residual_rms * 648000.0 / np.pi,
-            "segment_counts": list(cal.segment_counts),
-            "dropped": list(cal.dropped),
-            "messages": list(cal.messages),
+            "n_terms": cal.stats["n_terms"],
+            "rank": cal.stats["rank"],
+            "condition": cal.stats["condition"],
+            "residual_rms_arcsec": cal.stats["residual_rms"] * 648000.0 / np.pi,
+            "segment_counts": list(cal.stats["segment_counts"]),
+            "dropped": list(cal.stats["dropped"]),
+            "messages": messages,
             "current_scale": scale,
             "fit_s": fit_s,
         },
         "scenarios": P.metrics_of(est_m, ds.test, rated),
     }
-    first_test = next(iter(ds.test.values()))
+    first_test = P.first_samples(next(iter(ds.test.values())), 100)
     if outputs["timing"]:
         metrics["model"]["timing"] = P.time_per_100(
-            lambda r: compliance.estimate_torque(cal.model, r).torque,
+            lambda r: compliance.estimate_torque(cal.value, r).torque,
             first_test,
             outputs["timing_repeats"],
         )
@@ -175,18 +176,18 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
             if est is None:
                 continue
             for name, rec in ds.test.items():
-                e = est[name]
-                torque = e.torque if hasattr(e, "torque") else e
+                t, measured, torque, errors = P.figure_series(est[name], rec)
                 label = "model-based method" if method == "model" else "BP network"
                 rel = f"figures/{method}_{name}.png"
                 rd.write_bytes(
                     rel,
                     torque_figure(
-                        np.asarray(rec.t),
-                        np.asarray(rec.column("torque")),
-                        np.asarray(torque),
+                        t,
+                        measured,
+                        torque,
                         title=f"{label}, {name}: estimated vs measured torque",
                         rated=rated,
+                        errors=errors,
                     ),
                 )
                 figures.append((rel, f"{label}, {name}"))
@@ -201,7 +202,7 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
         save_model(
             rd.path("model.json"),
             joint,
-            compliance=cal.model,
+            compliance=cal.value,
             network=net,
             meta={"experiment": cfg["experiment"]["name"], "seed": seed, "data": ds.provenance},
         )

@@ -23,6 +23,7 @@ from ..config import (
 )
 from ..config._preflight import check_angles
 from ..pipelines import _paper as P
+from ..pipelines._streamed import StreamedEstimate
 from ..reference import describe_column_reference
 from ..report import ResultDir, environment, find_knee, markdown_table, sweep_figure
 from ._common import Progress, add_common, experiment_inputs, parse_overrides
@@ -331,6 +332,8 @@ def _save_member(rd, i, value, fp, result) -> None:
 def _pooled(torques: dict, ds) -> dict:
     import numpy as np
 
+    if any(isinstance(e, StreamedEstimate) for e in torques.values()):
+        return _pooled_streamed(torques, ds)
     est = np.concatenate([np.asarray(torques[k]) for k in ds.test])
     ref = np.concatenate([np.asarray(r.column("torque")) for r in ds.test.values()])
     err = est - ref
@@ -343,6 +346,19 @@ def _pooled(torques: dict, ds) -> dict:
         e = err[i : i + r.n_samples]
         i += r.n_samples
         out["per_recording"][k] = float(np.sqrt(np.mean(e**2)))
+    return out
+
+
+def _pooled_streamed(estimates: dict, ds) -> dict:
+    """`_pooled` of streamed parts: their error sums merged."""
+    sums = [estimates[k].errors for k in ds.test]
+    total = sums[0]
+    for s in sums[1:]:
+        total = total.merged(s)
+    if not total.finite:
+        return {"rms": None, "max": None, "message": "non-finite estimate"}
+    out = {"rms": total.rms, "max": total.peak}
+    out["per_recording"] = {k: e.rms for k, e in zip(ds.test, sums)}
     return out
 
 
@@ -361,9 +377,12 @@ def _member_loop(cfg: dict, ds, method: str, seed: int) -> dict:
         model = P.build_model(cfg, ds.joint, P.current_scale(cfg, ds.train))
         cal = P.calibrate(cfg, model, ds.train)
         fit_s = time.perf_counter() - t0
-        torques = {k: e.torque for k, e in P.estimate_model(cal.model, ds.test).items()}
-        res = {**_pooled(torques, ds), "fit_s": fit_s, "n_terms": cal.n_terms}
-        res["condition"] = cal.condition
+        torques = {
+            k: e if isinstance(e, StreamedEstimate) else e.torque
+            for k, e in P.estimate_model(cal.value, ds.test).items()
+        }
+        res = {**_pooled(torques, ds), "fit_s": fit_s, "n_terms": cal.stats["n_terms"]}
+        res["condition"] = cal.stats["condition"]
         return res
     except HdjaxError as err:
         return {

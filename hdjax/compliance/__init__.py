@@ -24,8 +24,8 @@ from ._inversion import (
     torque_estimator as torque_estimator,
 )
 from ._lstsq import (
-    CalibrationResult as CalibrationResult,
     calibrate_lstsq as calibrate_lstsq,
+    calibration_messages as calibration_messages,
     check_invertible as check_invertible,
 )
 from ._model import ComplianceModel as ComplianceModel, paper_knots as paper_knots

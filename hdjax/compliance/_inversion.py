@@ -179,7 +179,7 @@ def _estimate_impl(model: ComplianceModel, sig: Signals):
     hs = _base_h(model, sig)
     g = None
     for term, c in effects["linear"]:
-        g = term.torque_slope(sig) * c[0] if g is None else g + term.torque_slope(sig) * c[0]
+        g = term.torque_gain(sig, c) if g is None else g + term.torque_gain(sig, c)
 
     def solve(r_eff):
         t, seg, amb, unres = _piecewise(model, r_eff, hs, g)

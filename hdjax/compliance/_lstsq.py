@@ -16,11 +16,22 @@ $A D^{-1}$ ($D$ the column norms):
   singular values of the small triangular factor and a rank-deficient design is refused with
   the names of the collinear terms.
 
-The condition number reported is that of the scaled design in both cases.
+The condition number reported is that of the scaled design in both cases. Every calibration
+returns an [`hdjax.Solution`][]: the fitted model in `value`, a [`hdjax.RESULTS`][] member in
+`result` and the diagnostics in `stats`:
+
+- `rank`, `n_terms` (active coefficients), `condition` (2-norm condition number of the
+  column-scaled design), `residual_rms` (twist residual [rad]), `n_samples`, `segment_counts`
+  (samples per torque segment), `dropped` (terms left out, each with the reason), `collinear`
+  (groups of term names spanning the null space of a rank-deficient design) and `fit_time_s`.
+
+[`calibration_messages`][] spells the diagnostics out for a user (terms left out, the
+collinear terms, the segments whose compliance is not positive).
 """
 
 from __future__ import annotations
 
+import time
 import warnings
 
 import equinox as eqx
@@ -31,6 +42,7 @@ import numpy as np
 from .._errors import CalibrationError, DataError, InversionError
 from .._features import signals
 from .._recording import Recording
+from .._solution import RESULTS, Solution
 from ._model import ComplianceModel
 from ._signals import Signals
 
@@ -42,26 +54,6 @@ CSNE_MAX_COND = 1e6
 
 MIN_SEGMENT_SAMPLES_PER_TERM = 3
 """A segment's own block is calibrated only with at least this many samples per coefficient."""
-
-
-class CalibrationResult(eqx.Module):
-    """A calibrated model with its diagnostics (returned by the calibration functions).
-
-    **Fields:** `model` (the fitted [`hdjax.compliance.ComplianceModel`][]), `rank`, `n_terms`
-    (active coefficients), `condition` (2-norm condition number of the column-scaled design),
-    `residual_rms` (twist residual [rad]), `n_samples`, `segment_counts` (samples per torque
-    segment), `dropped` (terms left out, with the reason) and `messages`.
-    """
-
-    model: ComplianceModel
-    rank: int = eqx.field(static=True)
-    n_terms: int = eqx.field(static=True)
-    condition: float = eqx.field(static=True)
-    residual_rms: float = eqx.field(static=True)
-    n_samples: int = eqx.field(static=True)
-    segment_counts: tuple[int, ...] = eqx.field(static=True)
-    dropped: tuple[str, ...] = eqx.field(static=True)
-    messages: tuple[str, ...] = eqx.field(static=True)
 
 
 def prepare(model: ComplianceModel, data) -> tuple[Signals, jax.Array]:
@@ -86,14 +78,22 @@ def _design(model: ComplianceModel, sig: Signals, torque):
 
 @jax.jit
 def _scaled_qr(A, b, active):
-    # QR of [A D^-1 | b]: R's last column holds Q^T b, so Q is never formed.
+    # QR of [A D^-1 | b]: R's last column holds Q^T b, so Q is never formed. The active columns
+    # go first: a zeroed (inactive) column ahead of active ones would leave part of their
+    # factor in its row of R (its Householder reflector is the identity), which
+    # R[active][:, active] would then lose. With the active columns first, the leading block
+    # of R is the factor of the active design alone; it is scattered back to the original
+    # column order (the inactive rows and columns are never read).
     act = active.astype(A.dtype)
     norms = jnp.sqrt(jnp.sum(A * A, axis=0))
     scale = jnp.where((norms > 0) & active, norms, 1.0)
-    As = jnp.concatenate([A * (act / scale)[None, :], b[:, None]], axis=1)
-    r = jnp.linalg.qr(As, mode="r")
+    perm = jnp.argsort(~active, stable=True)
+    As = (A * (act / scale)[None, :])[:, perm]
+    r = jnp.linalg.qr(jnp.concatenate([As, b[:, None]], axis=1), mode="r")
     p = A.shape[1]
-    return r[:p, p], r[:p, :p], scale
+    r_orig = jnp.zeros((p, p), A.dtype).at[perm[:, None], perm[None, :]].set(r[:p, :p])
+    qtb = jnp.zeros(p, A.dtype).at[perm].set(r[:p, p])
+    return qtb, r_orig, scale
 
 
 @eqx.filter_jit
@@ -252,7 +252,7 @@ def collinear_terms(r: np.ndarray, names: list[str], rtol: float = RANK_RTOL) ->
     return groups
 
 
-def calibrate_lstsq(model: ComplianceModel, data, *, throw: bool = True) -> CalibrationResult:
+def calibrate_lstsq(model: ComplianceModel, data, *, throw: bool = True) -> Solution:
     """Calibrate by linear least squares (Song et al. eqs. (15)-(17)), column-scaled (see module).
 
     **Arguments:**
@@ -260,14 +260,17 @@ def calibrate_lstsq(model: ComplianceModel, data, *, throw: bool = True) -> Cali
     - `model`: the structure to calibrate (coefficients are ignored).
     - `data`: a [`hdjax.Recording`][] with a reference `torque`, or a `(Signals, torque)` pair.
     - `throw`: raise on a rank-deficient design or a non-invertible compliance (default); with
-      `False` the problems are returned in `messages`.
+      `False` the problem is returned as the solution's `result` (`RESULTS.rank_deficient`,
+      `RESULTS.not_invertible` or `RESULTS.twist_reversed`).
 
-    **Returns:** a [`hdjax.compliance.CalibrationResult`][] whose `model` carries the coefficients.
+    **Returns:** an [`hdjax.Solution`][] whose `value` is the calibrated
+    [`hdjax.compliance.ComplianceModel`][]; its `stats` are listed in the module docstring.
 
     Segments and per-segment blocks the data does not reach are left out (and named in
-    `dropped`); the model's `torque_range` becomes the range of the reference torque within the
-    calibrated segments, so estimates outside it are flagged.
+    `stats["dropped"]`); the model's `torque_range` becomes the range of the reference torque
+    within the calibrated segments, so estimates outside it are flagged.
     """
+    t0 = time.perf_counter()
     sig, torque = prepare(model, data)
     n = sig.n_samples
     t_np = np.asarray(torque)
@@ -282,21 +285,21 @@ def calibrate_lstsq(model: ComplianceModel, data, *, throw: bool = True) -> Cali
             f"{n} samples cannot calibrate {p} coefficients; record at least {p} samples "
             f"(better {10 * p}) or reduce the model (fewer segments, lower orders)"
         )
-    messages = list(dropped and [f"left out: {d}" for d in dropped])
     fast = _csne(design, b, g, atb, active)
     if fast is not None:
         coef, cond = fast
-        rank = p
+        rank, collinear = p, ()
     else:
-        coef, rank, cond = _qr_solve(model, sig, torque, active, messages, throw)
+        coef, rank, cond, collinear = _qr_solve(model, sig, torque, active, throw)
     resid, _ = design.residual_and_atr(b, coef)
     del design
     calibrated = [s_ for s_ in range(model.n_segments) if active[s_]]
     t_in = t_np[np.isin(np.searchsorted(np.asarray(model.knots), t_np, side="right"), calibrated)]
     torque_range = (float(t_in.min()), float(t_in.max())) if t_in.size else model.torque_range
-    fitted = fitted_model(model, coef, active, torque_range, messages, dropped, throw)
-    return CalibrationResult(
-        model=fitted,
+    fitted, invertible = fitted_model(model, coef, active, torque_range, dropped, throw)
+    return calibration_solution(
+        fitted,
+        invertible,
         rank=rank,
         n_terms=p,
         condition=cond,
@@ -304,40 +307,81 @@ def calibrate_lstsq(model: ComplianceModel, data, *, throw: bool = True) -> Cali
         n_samples=n,
         segment_counts=counts,
         dropped=dropped,
-        messages=tuple(messages),
+        collinear=collinear,
+        fit_time_s=time.perf_counter() - t0,
     )
 
 
-def _qr_solve(model, sig, torque, active, messages, throw):
+def calibration_solution(fitted: ComplianceModel, invertible: RESULTS, **stats) -> Solution:
+    """The [`hdjax.Solution`][] of a calibration: a rank-deficient design first, then a
+    non-invertible compliance (`invertible`, from [`fitted_model`][]), else success."""
+    result = RESULTS.rank_deficient if stats["rank"] < stats["n_terms"] else invertible
+    return Solution(fitted, result, stats)
+
+
+def calibration_messages(solution: Solution) -> list[str]:
+    """What a user should read about a calibration: the terms left out, and, if it failed, the
+    collinear terms or the segments whose compliance is not positive.
+
+    **Arguments:**
+
+    - `solution`: from [`hdjax.compliance.calibrate_lstsq`][], `calibrate_stream` or
+      `calibrate_rls` (with `throw=False` to see failures here rather than as errors).
+
+    **Returns:** one line per problem, `[]` when there is nothing to say.
+    """
+    st = solution.stats
+    out = [f"left out: {d}" for d in st["dropped"]]
+    if st["rank"] < st["n_terms"]:
+        out.append(rank_message(st["rank"], st["n_terms"], st["collinear"]))
+    msg = check_invertible(solution.value)
+    if msg:
+        out.append(msg)
+    return out
+
+
+def failure_message(solution: Solution) -> str:
+    """The detailed reason a calibration failed (the collinear terms of a rank-deficient design,
+    or the segments whose compliance is not positive), `""` when it succeeded."""
+    st = solution.stats
+    if solution.result == RESULTS.rank_deficient:
+        return rank_message(st["rank"], st["n_terms"], st["collinear"])
+    return check_invertible(solution.value) if not solution.ok else ""
+
+
+def rank_message(rank: int, p: int, collinear) -> str:
+    """The explanation of a rank-deficient design, naming its collinear term groups."""
+    desc = "; ".join("{" + ", ".join(g) + "}" for g in collinear)
+    return (
+        f"rank-deficient design: rank {rank} < {p} terms; collinear terms: {desc}. The data "
+        "does not excite these terms independently (e.g. a constant current makes the "
+        "current polynomial collinear with the constant): add load variation or motion, or "
+        "remove the terms from the model"
+    )
+
+
+def _qr_solve(model, sig, torque, active, throw):
     """Scaled Householder QR on the dense design: rank, condition and (if full rank) solution."""
     A = _design(model, sig, torque)
     qtb, r, scale = _scaled_qr(A, sig.twist, jnp.asarray(active))
-    return solve_from_r(
-        model, np.asarray(r), np.asarray(qtb), np.asarray(scale), active, messages, throw
-    )
+    return solve_from_r(model, np.asarray(r), np.asarray(qtb), np.asarray(scale), active, throw)
 
 
-def solve_from_r(model, r, qtb, scale, active, messages, throw):
-    """Rank, condition and solution from the factor `R` of the scaled design and `Q^T b` (the
-    rank decision and the collinear-terms message of [`calibrate_lstsq`][])."""
+def solve_from_r(model, r, qtb, scale, active, throw):
+    """Rank, condition, solution and collinear term groups from the factor `R` of the scaled
+    design and `Q^T b` (the rank decision of [`calibrate_lstsq`][]; a rank-deficient design
+    raises `CalibrationError` naming the collinear terms when `throw`)."""
     p = int(active.sum())
     r_np = np.asarray(r)[np.ix_(active, active)]
     s = np.linalg.svd(r_np, compute_uv=False)
     rank = int((s > RANK_RTOL * s[0]).sum())
     cond = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
     names = [nm for nm, a in zip(model.term_names, active) if a]
+    collinear: tuple = ()
     if rank < p:
-        groups = collinear_terms(r_np, names)
-        desc = "; ".join("{" + ", ".join(g) + "}" for g in groups)
-        msg = (
-            f"rank-deficient design: rank {rank} < {p} terms; collinear terms: {desc}. The data "
-            "does not excite these terms independently (e.g. a constant current makes the "
-            "current polynomial collinear with the constant): add load variation or motion, or "
-            "remove the terms from the model"
-        )
+        collinear = tuple(tuple(g) for g in collinear_terms(r_np, names))
         if throw:
-            raise CalibrationError(msg)
-        messages.append(msg)
+            raise CalibrationError(rank_message(rank, p, collinear))
     x_scaled = np.zeros(model.n_coef)
     qb = np.asarray(qtb)[active]
     x_scaled[active] = (
@@ -345,7 +389,7 @@ def solve_from_r(model, r, qtb, scale, active, messages, throw):
     )
     coef = x_scaled / np.asarray(scale)
     coef[~active] = 0.0
-    return coef, rank, cond
+    return coef, rank, cond, collinear
 
 
 def _solve_tri(r, b):
@@ -354,23 +398,34 @@ def _solve_tri(r, b):
     return scipy.linalg.solve_triangular(r, b, lower=False)
 
 
-def fitted_model(model, coef, active, torque_range, messages, dropped, throw):
-    """`model` with the solved coefficients, its active terms and calibrated torque range; an
-    `InversionError` (or, with `throw=False`, a message) when it cannot be inverted, and a
-    warning naming the terms the data could not reach. Shared by the batch and streamed fits."""
+def fitted_model(model, coef, active, torque_range, dropped, throw):
+    """`model` with the solved coefficients, its active terms and calibrated torque range, and
+    whether it can be inverted (a [`hdjax.RESULTS`][] member); an `InversionError` when it
+    cannot and `throw`, and a warning naming the terms the data could not reach. Shared by the
+    batch and streamed fits."""
     fitted = eqx.tree_at(lambda m: m.coef, model, jnp.asarray(coef))
     fitted = _with_static(fitted, active=tuple(bool(a) for a in active), torque_range=torque_range)
-    msg = check_invertible(fitted)
-    if msg:
-        if throw:
-            raise InversionError(msg)
-        messages.append(msg)
+    invertible = invertibility(fitted)
+    if invertible != RESULTS.successful and throw:
+        raise InversionError(check_invertible(fitted))
     if dropped:
         warnings.warn(
             "calibration left out terms the data cannot reach: " + "; ".join(dropped),
             stacklevel=3,  # the caller of calibrate_lstsq / calibrate_stream
         )
-    return fitted
+    return fitted, invertible
+
+
+def invertibility(model: ComplianceModel) -> RESULTS:
+    """`RESULTS.successful` when the calibrated compliance can be inverted for torque;
+    `RESULTS.twist_reversed` when the twist falls with torque in every segment, else
+    `RESULTS.not_invertible` (see [`check_invertible`][])."""
+    if not check_invertible(model):
+        return RESULTS.successful
+    k = np.asarray(model.k)
+    if all(kj < 0 for kj, a in zip(k, model.active) if a):
+        return RESULTS.twist_reversed
+    return RESULTS.not_invertible
 
 
 def _with_static(model: ComplianceModel, **changes) -> ComplianceModel:

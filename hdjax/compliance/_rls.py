@@ -15,6 +15,8 @@ scaled by fixed factors (from the initial block) so $P$ stays well scaled.
 
 from __future__ import annotations
 
+import time
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -22,12 +24,13 @@ import numpy as np
 
 from .._custom_types import Array, ArrayLike, Float
 from .._errors import CalibrationError, ConfigError, InversionError
+from .._solution import RESULTS, Solution
 from ._lstsq import (
-    CalibrationResult,
     _SegmentedDesign,
     _select_active,
     _with_static,
     check_invertible,
+    invertibility,
     prepare,
 )
 from ._model import ComplianceModel
@@ -177,13 +180,18 @@ def calibrate_rls(
     forgetting: float = 1.0,
     init_samples: int | None = None,
     throw: bool = True,
-) -> CalibrationResult:
+) -> Solution:
     """Calibrate by recursive least squares (eqs. (18)-(25)), a block at a time.
 
     Same design, column selection and checks as [`hdjax.compliance.calibrate_lstsq`][]; with
     `forgetting=1` and well-conditioned data the result equals the batch solution to rounding.
     Samples are taken in time order.
+
+    **Returns:** an [`hdjax.Solution`][] with the calibrated model in `value` and the stats of
+    [`hdjax.compliance.calibrate_lstsq`][] (the rank is not decided here: `rank` is the number of
+    active terms, `condition` is NaN).
     """
+    t0 = time.perf_counter()
     sig, torque = prepare(model, data)
     A = _SegmentedDesign(model, sig, torque).dense()
     active, counts, dropped = _select_active(model, np.abs(A).max(axis=0) > 0, np.asarray(torque))
@@ -202,11 +210,10 @@ def calibrate_rls(
     resid = A @ coef - np.asarray(sig.twist)
     fitted = eqx.tree_at(lambda m: m.coef, model, jnp.asarray(coef))
     fitted = _with_static(fitted, active=tuple(bool(x) for x in active))
-    msg = check_invertible(fitted)
-    if msg and throw:
-        raise InversionError(msg)
-    return CalibrationResult(
-        model=fitted,
+    invertible = invertibility(fitted)
+    if invertible != RESULTS.successful and throw:
+        raise InversionError(check_invertible(fitted))
+    stats = dict(
         rank=len(idx),
         n_terms=len(idx),
         condition=float("nan"),
@@ -214,5 +221,7 @@ def calibrate_rls(
         n_samples=sig.n_samples,
         segment_counts=counts,
         dropped=dropped,
-        messages=(msg,) if msg else (),
+        collinear=(),
+        fit_time_s=time.perf_counter() - t0,
     )
+    return Solution(fitted, invertible, stats)

@@ -17,6 +17,7 @@ torque it differences.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Iterable, Iterator
 
 import equinox as eqx
@@ -27,10 +28,11 @@ import numpy as np
 from .._errors import CalibrationError, DataError
 from .._formats import iter_recordings
 from .._recording import Recording
+from .._solution import Solution
 from ._lstsq import (
     CSNE_MAX_COND,
-    CalibrationResult,
     _compact_index,
+    calibration_solution,
     fitted_model,
     select_active_counts,
     solve_from_r,
@@ -285,7 +287,7 @@ def _fused_passes(model, stream, chunk):
 
 def calibrate_stream(
     model: ComplianceModel, stream: RecordingStream, *, chunk: int, throw: bool = True
-) -> CalibrationResult:
+) -> Solution:
     """Calibrate by linear least squares from a stream of chunks (Song et al. eqs. (15)-(17)).
 
     **Arguments:**
@@ -296,9 +298,10 @@ def calibrate_stream(
     - `chunk`: the chunk length the stream delivers (fixes the compiled shapes).
     - `throw`: as in [`hdjax.compliance.calibrate_lstsq`][].
 
-    **Returns:** the [`hdjax.compliance.CalibrationResult`][] `calibrate_lstsq` gives on the
-    concatenated recordings; memory is bounded by the chunk, not the log.
+    **Returns:** the [`hdjax.Solution`][] `calibrate_lstsq` gives on the concatenated
+    recordings; memory is bounded by the chunk, not the log.
     """
+    t0 = time.perf_counter()
     _check_chunk(chunk)
     n_seg, p = model.n_segments, model.n_coef
     ne = NormalEquations(p)
@@ -324,7 +327,7 @@ def calibrate_stream(
             f"{n} samples cannot calibrate {n_act} coefficients; record at least {n_act} "
             f"samples (better {10 * n_act}) or reduce the model (fewer segments, lower orders)"
         )
-    messages = [f"left out: {d}" for d in dropped]
+    collinear: tuple = ()
     csne = scaled_cholesky(g, atb, active, CSNE_MAX_COND)
     # -- pass 2: refinement with the true residual, or the QR factor ------------------------
     if csne is not None and csne[1] <= REFINE_ABOVE_COND:
@@ -363,15 +366,16 @@ def calibrate_stream(
         r_full[np.ix_(active, active)] = r_c
         qtb_full[active] = qtb_c
         scale = np.where(active, norms, 1.0)
-        coef, rank, cond = solve_from_r(model, r_full, qtb_full, scale, active, messages, throw)
+        coef, rank, cond, collinear = solve_from_r(model, r_full, qtb_full, scale, active, throw)
     calibrated = active[:n_seg]
     if calibrated.any() and np.isfinite(t_lo[calibrated]).any():
         torque_range = (float(t_lo[calibrated].min()), float(t_hi[calibrated].max()))
     else:
         torque_range = model.torque_range
-    fitted = fitted_model(model, coef, active, torque_range, messages, dropped, throw)
-    return CalibrationResult(
-        model=fitted,
+    fitted, invertible = fitted_model(model, coef, active, torque_range, dropped, throw)
+    return calibration_solution(
+        fitted,
+        invertible,
         rank=rank,
         n_terms=n_act,
         condition=cond,
@@ -379,5 +383,6 @@ def calibrate_stream(
         n_samples=n,
         segment_counts=counts_t,
         dropped=dropped,
-        messages=tuple(messages),
+        collinear=collinear,
+        fit_time_s=time.perf_counter() - t0,
     )

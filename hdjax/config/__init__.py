@@ -3,7 +3,8 @@
 - [`hdjax.config.load_experiment`][]: read and validate a TOML experiment file (line and
   column on syntax errors, "did you mean" for unknown tables and keys), defaults filled in.
 - [`hdjax.config.build_dataset`][]: the calibration and test recordings of an experiment
-  (plant scenarios, files through a column map, or synthetic).
+  (plant scenarios, files through a column map, or synthetic); with `[fit] chunk` on files a
+  [`hdjax.config.StreamedDataset`][] that reads them chunk by chunk.
 - [`hdjax.config.save_model`][] / [`hdjax.config.load_model`][]: a calibrated model in one file.
 - [`hdjax.config.preflight`][]: the checks of a resolved config (or one `--set` or sweep member)
   before any work: the model can be built, the data fits in memory.
@@ -40,3 +41,4 @@ from ._schema import (
     resolve as resolve,
     sweepable_settings as sweepable_settings,
 )
+from ._streamed import StreamedDataset as StreamedDataset

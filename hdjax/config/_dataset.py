@@ -11,6 +11,8 @@
   `[data.extras]`, see [`hdjax.ColumnMap`][]); paths are relative to the experiment file.
   Test recordings are named files, or the last `split` fraction of each training file (with
   `split_blocks = B`: every round(1/split)-th block of B samples, so both parts span the run).
+- `[fit] chunk > 0` with `kind = "files"`: the same parts as streams read chunk by chunk
+  ([`hdjax.config.StreamedDataset`][]), so memory is bounded by the chunk, not the logs.
 - `kind = "synthetic"`: recordings generated from a known compliance (a five-segment
   flexspline, a cubic wave-generator term, a first-order kinematic error and white encoder
   noise) — a self-contained demo and test bed that needs no plant.
@@ -32,6 +34,7 @@ from .._recording import Recording, make_recording
 from ..compliance import paper_knots
 from ..reference import describe_column_reference, load_with_reference
 from ._schema import joint_of
+from ._streamed import build_streamed_dataset, streams
 
 
 @dataclasses.dataclass
@@ -69,6 +72,14 @@ def build_dataset(exp, progress=None) -> Dataset:
     data = exp["data"]
     joint = joint_of(exp)
     say = progress or (lambda msg: None)
+    if streams(exp):  # [fit] chunk on files: parts read chunk by chunk, never whole
+        ds = build_streamed_dataset(exp, joint, say)
+        ds.reference = {
+            "kind": "column",
+            "description": describe_column_reference(data["columns"], data["kind"]),
+        }
+        ds.provenance.append(ds.reference["description"])
+        return ds
     if data["kind"] == "files":
         ds = _from_files(exp, joint, say)
     elif data["kind"] == "synthetic":

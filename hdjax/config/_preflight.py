@@ -157,13 +157,19 @@ def check_angles(ds, *, force: bool = False, warn=None) -> str:
     **Raises:** [`hdjax.ModelMismatchError`][] naming the recording, unless `force`.
     """
     whys: dict = {}  # source -> why (a file split into calibration and test parts: once)
-    for rec in list(ds.train) + list(ds.test.values()):
-        why = ratio_mismatch(ds.joint.ratio, rec)
+    if hasattr(ds, "ratio_mismatches"):  # streamed parts: from the sums of the build pass
+        found = ds.ratio_mismatches()
+    else:
+        found = [
+            (rec.source, ratio_mismatch(ds.joint.ratio, rec))
+            for rec in list(ds.train) + list(ds.test.values())
+        ]
+    for source, why in found:
         if not why:
             continue
         if not force:
             raise ModelMismatchError(f"{why}; pass --force to run anyway")
-        whys.setdefault(rec.source, why)
+        whys.setdefault(source, why)
     if not whys:
         return ""
     first = next(iter(whys.values()))

@@ -10,8 +10,8 @@ from ._library import (
 )
 from ._loop import (
     DiscoverOptions as DiscoverOptions,
-    DiscoveryResult as DiscoveryResult,
-    StepResult as StepResult,
+    DiscoveryRecord as DiscoveryRecord,
+    DiscoveryStep as DiscoveryStep,
     calibrate_baseline as calibrate_baseline,
     discover as discover,
     refit_structure as refit_structure,

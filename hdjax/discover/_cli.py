@@ -19,7 +19,7 @@ import equinox as eqx
 
 from .. import __version__
 from .._errors import DataError, HdjaxError
-from .._io import load_csv, read_toml
+from .._io import load_recording, read_toml
 from .._joint import load_joint
 from ..config._preflight import check_read_memory
 from ..report import ResultDir
@@ -55,7 +55,8 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument(
         "--train",
         type=Path,
-        help="training recording (CSV: t, theta_m, theta_l, current, torque [+ extras])",
+        help="training recording (CSV, .npz, Parquet, HDF5, MATLAB v7.3 or MCAP, chosen by the "
+        "suffix; columns t, theta_m, theta_l, current, torque [+ extras])",
     )
     p.add_argument(
         "--test",
@@ -142,8 +143,9 @@ def _run_into(rd, args: argparse.Namespace) -> int:
             train, test, joint, cfg, cfg_notes = load_discover_config(args.config)
         else:
             joint = load_joint(args.joint)
-            train = load_csv(args.train)
-            test = load_csv(args.test)
+            # every log format, by suffix, through the loader the other commands use
+            train = load_recording(args.train)
+            test = load_recording(args.test)
             cfg_notes = ["reference: the 'torque' column of the --train and --test files"]
     say = (lambda s: None) if args.quiet else (lambda s: print(f"[discover] {s}", file=sys.stderr))
     for w in caught:
@@ -165,7 +167,7 @@ def _run_into(rd, args: argparse.Namespace) -> int:
         )
         train, test = drop(train), drop(test)
     result = _loop.discover(train, test, joint, options, progress=say)
-    result.notes[:0] = cfg_notes + notes + [f"input warning: {w.message}" for w in caught]
+    result.aux.notes[:0] = cfg_notes + notes + [f"input warning: {w.message}" for w in caught]
     say("writing report" + ("" if args.no_figures else " and figures"))
     write_report(
         result,
@@ -181,8 +183,8 @@ def _run_into(rd, args: argparse.Namespace) -> int:
         },
     )
     say(
-        f"done in {result.seconds:.1f} s: effects {result.effects or 'none'}; TEST torque RMS "
-        f"{result.baseline.rms:.4g} -> {result.final.rms:.4g} N·m"
+        f"done in {result.stats['fit_time_s']:.1f} s: effects {result.aux.effects or 'none'}; "
+        f"TEST torque RMS {result.aux.baseline.rms:.4g} -> {result.aux.final.rms:.4g} N·m"
     )
     return 0
 

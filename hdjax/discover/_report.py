@@ -13,8 +13,9 @@ import numpy as np
 from .. import effects
 from .._features import find_gaps
 from .._plotting import pyplot
+from .._solution import Solution
 from ..compliance._lstsq import prepare
-from ._loop import ARCSEC, DiscoveryResult, residual_spectra
+from ._loop import ARCSEC, DiscoveryRecord, residual_spectra
 
 STOPPING_RULE = (
     "a candidate is eligible when pysindy STLSQ selects it and it removes at least min_gain of "
@@ -26,8 +27,10 @@ STOPPING_RULE = (
 )
 
 
-def report_dict(result: DiscoveryResult, *, extra: dict | None = None) -> dict:
-    """The JSON report (the `hdjax discover` contract plus diagnostics)."""
+def report_dict(solution: Solution, *, extra: dict | None = None) -> dict:
+    """The JSON report (the `hdjax discover` contract plus diagnostics) of the
+    [`hdjax.Solution`][] that [`hdjax.discover.discover`][] returns."""
+    result = solution.aux
     b, f = result.baseline, result.final
     d = {
         "baseline": {
@@ -66,8 +69,8 @@ def report_dict(result: DiscoveryResult, *, extra: dict | None = None) -> dict:
         "unexplained": result.unexplained,
         "cv_block_samples": result.cv_block_samples,
         "notes": result.notes,
-        "final_model": result.final_model.to_dict(),
-        "seconds": result.seconds,
+        "final_model": solution.value.to_dict(),
+        "seconds": solution.stats["fit_time_s"],
     }
     if extra:
         d.update(extra)
@@ -112,7 +115,7 @@ def _plot_residual_vs_angle(model, data, title, path):
     plt.close(fig)
 
 
-def _plot_torque(result: DiscoveryResult, path):
+def _plot_torque(result: DiscoveryRecord, path):
     plt = pyplot()
 
     test = result.test
@@ -146,7 +149,7 @@ def _plot_torque(result: DiscoveryResult, path):
     plt.close(fig)
 
 
-def _plot_progress(result: DiscoveryResult, path):
+def _plot_progress(result: DiscoveryRecord, path):
     plt = pyplot()
 
     labels = ["start"] + [s.key for s in result.steps]
@@ -164,8 +167,10 @@ def _plot_progress(result: DiscoveryResult, path):
     plt.close(fig)
 
 
-def write_figures(result: DiscoveryResult, train, folder: Path) -> list[tuple[str, str]]:
-    """All report figures into `folder`; returns (caption, file name) pairs."""
+def write_figures(solution: Solution, train, folder: Path) -> list[tuple[str, str]]:
+    """All report figures of a [`hdjax.discover.discover`][] solution into `folder`; returns
+    (caption, file name) pairs."""
+    result = solution.aux
     folder.mkdir(parents=True, exist_ok=True)
     figs = []
     models = [result.baseline_model] + [s.model for s in result.steps]
@@ -234,18 +239,19 @@ def report_markdown(d: dict, figures: list[tuple[str, str]]) -> str:
     return "\n".join(lines)
 
 
-def write_report(result: DiscoveryResult, out: Path, *, train=None, figures=True, extra=None):
-    """Write `report.json`, `report.md` and `figures/` into `out`, atomically.
+def write_report(solution: Solution, out: Path, *, train=None, figures=True, extra=None):
+    """Write `report.json`, `report.md` and `figures/` of a [`hdjax.discover.discover`][]
+    solution into `out`, atomically.
 
     Everything is written into a temporary folder beside `out` first; `out` (which must be
     absent or empty) receives the files only when all of them exist, `report.json` last.
     """
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    d = report_dict(result, extra=extra)
+    d = report_dict(solution, extra=extra)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
-        figs = write_figures(result, train, tmp / "figures") if figures else []
+        figs = write_figures(solution, train, tmp / "figures") if figures else []
         (tmp / "report.md").write_text(report_markdown(d, figs))
         (tmp / "report.json").write_text(json.dumps(d, indent=2, default=_json_default))
         out.mkdir(exist_ok=True)

@@ -118,6 +118,8 @@ def refine_peak(theta, residual, order: float, resolution: float) -> float:
 
 def spectrum_peaks(spec: OrderSpectrum, *, n_peaks: int = 3, min_power: float = 0.01):
     """The strongest local maxima of a spectrum, at least one resolution apart."""
+    if n_peaks <= 0:
+        return []
     p = spec.power
     is_peak = np.r_[False, (p[1:-1] > p[:-2]) & (p[1:-1] >= p[2:]), False]
     cand = np.flatnonzero(is_peak & (p >= min_power))

@@ -74,12 +74,23 @@ from ._registry import (
     unregister as unregister,
     vocabulary as vocabulary,
 )
+from ._ripple import (
+    ComplianceRipple as ComplianceRipple,
+    Ripple as Ripple,
+    RippleFamily as RippleFamily,
+    ripple_key as ripple_key,
+    torque_ratio as torque_ratio,
+)
 from ._stiffening import (
     CubicSpring as CubicSpring,
     Stiffening as Stiffening,
     StiffeningFamily as StiffeningFamily,
 )
-from ._stribeck import StribeckFamily as StribeckFamily, StribeckFriction as StribeckFriction
+from ._stribeck import (
+    Stribeck as Stribeck,
+    StribeckFamily as StribeckFamily,
+    StribeckFriction as StribeckFriction,
+)
 from ._thermal import (
     Column as Column,
     ColumnTimesTorque as ColumnTimesTorque,
@@ -107,6 +118,7 @@ register(StribeckFamily())
 register(HysteresisFamily())
 register(BacklashFamily())
 register(StiffeningFamily())
+register(RippleFamily())
 register(DampingFamily())
 register(ThermalFamily())
 register(WaveGeneratorFamily())

@@ -46,6 +46,8 @@ with gaps: memory states (hysteresis) restart there (see [`hdjax.effects.dahl_st
 PLANT_SLOTS = (
     "kinematic_m",
     "kinematic_l",
+    "compliance_ripple_m",
+    "compliance_ripple_l",
     "motor_friction",
     "output_friction",
     "hysteresis",
@@ -58,6 +60,9 @@ PLANT_SLOTS = (
 
 - `kinematic_m`, `kinematic_l`: a twist offset [rad] from the recorded motor / load angle,
   `effect(angle, inv)` (Song et al. eq. (9));
+- `compliance_ripple_m`, `compliance_ripple_l`: a relative change of the series compliance
+  from the recorded motor / load angle, `effect(angle, inv)` and `max_change()` (the plant
+  scales the compliance budget by one plus the sum of the changes);
 - `motor_friction`, `output_friction`: a friction torque [N·m] from the motor / link speed,
   `effect(omega, inv)`;
 - `compliance`: a deflection [rad] in series with the flexspline, `deflection(T, inv)` and
@@ -168,23 +173,32 @@ class AbstractSignalTerm(AbstractTorqueFreeTerm):
 
 class AbstractLinearTorqueTerm(AbstractTerm):
     r"""A term linear in torque, $\psi = u(x) T$ (`torque_kind = "linear"`), inverted in closed
-    form. Subclasses implement `torque_slope(sig)` $= u(x)$ and its NumPy twin."""
+    form. Subclasses implement `torque_slope(sig)` $= u(x)$ and its NumPy twin: shape
+    `(n_samples,)` for a one-column term, `(n_samples, n_columns)` for a group (e.g. the
+    $\sin, \cos$ pair of a compliance ripple), one column of $u$ per column of the group."""
 
     torque_kind: ClassVar[str] = "linear"
 
     @abc.abstractmethod
     def torque_slope(self, sig):
-        """$u(x)$ with $\\psi = u(x) T$."""
+        r"""$u(x)$ with $\psi = u(x) T$."""
 
     @abc.abstractmethod
     def numpy_torque_slope(self, sig) -> np.ndarray:
         """`torque_slope` in NumPy."""
 
+    def torque_gain(self, sig, coef):
+        r"""$\partial\psi/\partial T = u(x)\,c$ for the group's fitted coefficients `coef`."""
+        u = self.torque_slope(sig)
+        return u @ coef if u.ndim == 2 else u * coef[0]
+
     def columns(self, sig, torque):
-        return (self.torque_slope(sig) * torque)[:, None]
+        u = self.torque_slope(sig)
+        return (u if u.ndim == 2 else u[:, None]) * torque[:, None]
 
     def numpy_columns(self, sig, torque=None) -> np.ndarray:
-        return (self.numpy_torque_slope(sig) * np.asarray(torque))[:, None]
+        u = self.numpy_torque_slope(sig)
+        return (u if u.ndim == 2 else u[:, None]) * np.asarray(torque)[:, None]
 
 
 class AbstractMemorylessTerm(AbstractTerm):
@@ -375,9 +389,12 @@ class CandidateContext:
     `existing_keys` / `existing_terms` (effects already in the model, not offered again),
     `extra_columns` (usable extra recording columns), `families` (discover families switched
     on), `options` (the library options), `spectrum_orders` (a callable
-    `(signal, order_range, named_orders, existing_orders, n_peaks) -> [(order, origin)]`:
-    the spectrum peaks of the residual against `signal` (refined) and the named orders it can
-    resolve, not yet in the model; it records the spectrum; spectrum families call it).
+    `(signal, order_range, named_orders, existing_orders, n_peaks, *, residual=None,
+    where=None) -> [(order, origin)]`: the spectrum peaks of the residual against `signal`
+    (refined) and the named orders it can resolve, not yet in the model; it records the
+    spectrum; spectrum families call it. With `residual` (and a boolean mask `where` of the
+    samples it covers) it analyses that signal instead and records nothing: the ripple family
+    passes residual ÷ torque).
     """
 
     sig: Any

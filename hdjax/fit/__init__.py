@@ -8,7 +8,6 @@ from ._estimators import (
 )
 from ._hybrid import (
     PLANT_FIELDS as PLANT_FIELDS,
-    HybridFit as HybridFit,
     HybridModel as HybridModel,
     check_inputs as check_inputs,
     fit_hybrid as fit_hybrid,
@@ -24,7 +23,6 @@ from ._inputs import (
 )
 from ._linear import (
     METHODS as METHODS,
-    GradientFit as GradientFit,
     LinearProblem as LinearProblem,
     fit_compliance_gradient as fit_compliance_gradient,
     linear_problem as linear_problem,

@@ -37,6 +37,7 @@ import optimistix as optx
 
 from .._custom_types import PRNGKeyArray
 from .._errors import ConfigError, DataError, DivergenceError, ModelMismatchError
+from .._solution import RESULTS, Solution
 from ..compliance import estimate_torque_arrays
 from ..network import FeatureLayout, Network, standardise
 from ..plant import motor_friction
@@ -187,16 +188,6 @@ def _trainable_spec(model: HybridModel, *, compliance: bool, network: bool, plan
     return spec
 
 
-class HybridFit(eqx.Module):
-    """Result of [`hdjax.fit.fit_hybrid`][]: the fitted `model`, loss `history`, timing."""
-
-    model: HybridModel
-    history: jax.Array
-    steps: int = eqx.field(static=True)
-    method: str = eqx.field(static=True)
-    fit_time_s: float = eqx.field(static=True)
-
-
 @eqx.filter_jit
 def _adam_fit(dyn, static, inp, var, key, lr, steps: int, batch: int | None):
     opt = optax.adam(optax.cosine_decay_schedule(lr, steps, 0.01))
@@ -230,7 +221,7 @@ def fit_hybrid(
     train_compliance: bool = True,
     train_network: bool = True,
     train_plant: bool = True,
-) -> HybridFit:
+) -> Solution:
     """Fit all trainable parameters of a hybrid model jointly, with one loss.
 
     **Arguments:**
@@ -244,7 +235,10 @@ def fit_hybrid(
     - `key`: PRNG key for minibatches (keyword-only).
     - `train_compliance`, `train_network`, `train_plant`: which parameter groups move.
 
-    **Returns:** a [`hdjax.fit.HybridFit`][].
+    **Returns:** an [`hdjax.Solution`][] whose `value` is the fitted model; `stats` holds the
+    loss `history` (one entry per Adam step; the final loss for Levenberg-Marquardt), the final
+    `loss`, `steps`, `method` and `fit_time_s`. The result is `RESULTS.max_steps_reached` when
+    Levenberg-Marquardt stopped at `steps` before its tolerance.
 
     **Raises:** [`hdjax.DivergenceError`][] naming the learning rate if the loss becomes
     non-finite.
@@ -265,6 +259,7 @@ def fit_hybrid(
     )
     dyn, static = eqx.partition(model, spec)
     t0 = time.perf_counter()
+    result = RESULTS.successful
     with jax.numpy_dtype_promotion("standard"):
         if method == "adam":
             batch = None if batch_size is None or batch_size >= inputs.n_samples else batch_size
@@ -289,6 +284,8 @@ def fit_hybrid(
             r = resid(dyn, None)
             hist = jnp.asarray([jnp.mean(r * r)])
             n_steps = int(sol.stats["num_steps"])
+            if sol.result != optx.RESULTS.successful:
+                result = RESULTS.max_steps_reached
     fitted = eqx.combine(dyn, static)
     last = float(hist[-1])
     if not np.isfinite(last):
@@ -296,13 +293,10 @@ def fit_hybrid(
             f"hybrid fit by {method} diverged (loss {last}); the learning rate {learning_rate:g} "
             f"is too large; try {learning_rate / 10:g}"
         )
-    return HybridFit(
-        model=fitted,
-        history=hist,
-        steps=n_steps,
-        method=method,
-        fit_time_s=time.perf_counter() - t0,
+    stats = dict(
+        history=hist, loss=last, steps=n_steps, method=method, fit_time_s=time.perf_counter() - t0
     )
+    return Solution(fitted, result, stats)
 
 
 def check_inputs(model: HybridModel, inputs: HybridInputs) -> None:

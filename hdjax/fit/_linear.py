@@ -42,6 +42,7 @@ import optimistix as optx
 from .._errors import CalibrationError, ConfigError, DataError
 from .._features import signals
 from .._recording import Recording
+from .._solution import RESULTS, Solution
 from ..compliance._lstsq import select_active
 
 METHODS = ("gauss_newton", "levenberg_marquardt", "adam")
@@ -106,16 +107,6 @@ def linear_problem(model, recording: Recording, active=None) -> LinearProblem:
     )
 
 
-class GradientFit(eqx.Module):
-    """Result of a gradient calibration: `model`, final `loss` (scaled units), `steps`, timing."""
-
-    model: eqx.Module
-    loss: float = eqx.field(static=True)
-    steps: int = eqx.field(static=True)
-    method: str = eqx.field(static=True)
-    fit_time_s: float = eqx.field(static=True)
-
-
 @eqx.filter_jit
 def _adam(problem: LinearProblem, w, lr, steps: int, floor: float):
     opt = optax.adam(optax.exponential_decay(lr, steps, floor))
@@ -154,7 +145,10 @@ def fit_compliance_gradient(
     - `whiten`: precondition Adam by the design's triangular factor (see the module docstring).
     - `rtol`: relative/absolute tolerance of the optimistix solvers.
 
-    **Returns:** a [`hdjax.fit.GradientFit`][] whose `model` carries the coefficients.
+    **Returns:** an [`hdjax.Solution`][] whose `value` is the calibrated model; `stats` holds
+    the final `loss` (scaled units), `steps`, `method` and `fit_time_s`. The result is
+    `RESULTS.max_steps_reached` when an optimistix solver stopped at `steps` before its
+    tolerance, `RESULTS.nonfinite` when the loss is not finite.
     """
     if method not in METHODS:
         raise ConfigError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
@@ -162,6 +156,7 @@ def fit_compliance_gradient(
     prob = linear_problem(model, recording)
     n, p = prob.a.shape
     u0 = prob.to_u(model.coef)
+    result = RESULTS.successful
     if method == "adam":
         if whiten:
             _, r = jnp.linalg.qr(prob.a, mode="reduced")
@@ -179,17 +174,16 @@ def fit_compliance_gradient(
             lambda u, _: prob.a @ u - prob.b, solver, u0, max_steps=int(steps), throw=False
         )
         u, n_steps = sol.value, int(sol.stats["num_steps"])
+        if sol.result != optx.RESULTS.successful:
+            result = RESULTS.max_steps_reached
     u = jax.block_until_ready(u)
     loss = float(prob.loss(u))
     coef = prob.to_coef(u, model.n_coef)
     fitted = eqx.tree_at(lambda m: m.coef, model, jnp.asarray(coef))
-    return GradientFit(
-        model=_with_active(fitted, prob.active),
-        loss=loss,
-        steps=n_steps,
-        method=method,
-        fit_time_s=time.perf_counter() - t0,
-    )
+    if not np.isfinite(loss):
+        result = RESULTS.nonfinite
+    stats = dict(loss=loss, steps=n_steps, method=method, fit_time_s=time.perf_counter() - t0)
+    return Solution(_with_active(fitted, prob.active), result, stats)
 
 
 def _with_active(model, active):

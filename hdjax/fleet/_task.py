@@ -102,17 +102,17 @@ def _calibrate(spec) -> dict:
         scale = float(np.max(np.abs(np.asarray(rec.current)))) or 1.0
         res = calibrate_lstsq(paper_model(spec["model_structure"], joint, scale), rec)
     return {
-        "n_samples": res.n_samples,
-        "coefficients": _coefficients(res.model),
-        "twist_rms_arcsec": res.residual_rms * ARCSEC,
-        "condition": res.condition,
+        "n_samples": res.stats["n_samples"],
+        "coefficients": _coefficients(res.value),
+        "twist_rms_arcsec": res.stats["residual_rms"] * ARCSEC,
+        "condition": res.stats["condition"],
     }
 
 
-def _effect_amplitudes(result, train) -> list[dict]:
+def _effect_amplitudes(solution, train) -> list[dict]:
     """Each added effect's twist contribution on TRAIN (RMS, arcsec), from the final model."""
 
-    model = result.final_model
+    model = solution.value
     sig = signals_from_recording(train, model.ratio, model.twist_sign, velocity=model.velocity)
     coef = np.asarray(model.coef)
     i = model.n_coef - model.n_effect
@@ -123,7 +123,7 @@ def _effect_amplitudes(result, train) -> list[dict]:
         by_key[term.key] = float(np.std(cols @ coef[i : i + m])) * ARCSEC
         i += m
     out = []
-    for step in result.steps:
+    for step in solution.aux.steps:
         interval = getattr(step, "interval", None)
         lo, hi = (None, None) if interval is None else (float(interval[0]), float(interval[1]))
         out.append(
@@ -152,14 +152,15 @@ def _calibrate_discover(spec) -> dict:
         fourier_order=m["fourier_order"],
         per_segment=m["per_segment"],
     )
-    result = discover(train, test, joint, options)
+    sol = discover(train, test, joint, options)
+    result = sol.aux
     twist = result.steps[-1].twist_rms_arcsec if result.steps else result.baseline_twist_rms_arcsec
     return {
         "n_samples": rec.n_samples,
-        "coefficients": _coefficients(result.final_model),
+        "coefficients": _coefficients(sol.value),
         "twist_rms_arcsec": float(twist),
         "effects": list(result.effects),
-        "amplitudes": _effect_amplitudes(result, train),
+        "amplitudes": _effect_amplitudes(sol, train),
         "baseline_test_rms_Nm": float(result.baseline.rms),
         "test_rms_Nm": float(result.final.rms),
         "test_max_Nm": float(result.final.max),

@@ -31,7 +31,6 @@ from ._kalman import (
 )
 from ._mlp import Network as Network, predict as predict, standardise as standardise
 from .trainers import (
-    TrainResult as TrainResult,
     backprop_step as backprop_step,
     train_backprop as train_backprop,
     train_optax as train_optax,

@@ -101,14 +101,14 @@ class _FitContext:
         charged to every row that uses it."""
         if self._hybrid_ls is None:
             t0 = time.perf_counter()
-            m = hc.calibrate_lstsq(self.hybrid_structure, (self.sig_train, self.tq_train)).model
+            m = hc.calibrate_lstsq(self.hybrid_structure, (self.sig_train, self.tq_train)).value
             self._hybrid_ls = (m, time.perf_counter() - t0)
         return self._hybrid_ls
 
 
 def _fit_lstsq(c: _FitContext):
     t0 = time.perf_counter()
-    model = hc.calibrate_lstsq(c.structure, (c.sig_train, c.tq_train)).model
+    model = hc.calibrate_lstsq(c.structure, (c.sig_train, c.tq_train)).value
     return ComplianceEstimator(model), time.perf_counter() - t0
 
 
@@ -118,14 +118,15 @@ def _fit_rls(c: _FitContext):
     t0 = time.perf_counter()
     perm = np.random.default_rng(0).permutation(c.tq_train.shape[0])
     shuffled = (jax.tree.map(lambda a: a[perm], c.sig_train), c.tq_train[perm])
-    model = hc.calibrate_rls(c.structure, shuffled, init_samples=2000).model
+    model = hc.calibrate_rls(c.structure, shuffled, init_samples=2000).value
     return ComplianceEstimator(model), time.perf_counter() - t0
 
 
 def _fit_gradient(method: str):
     def fit(c: _FitContext):
         res = fit_compliance_gradient(c.structure, c.train_all, method=method, steps=4000)
-        return ComplianceEstimator(res.model), res.fit_time_s  # its own timing, compile included
+        # its own timing, compile included
+        return ComplianceEstimator(res.value), res.stats["fit_time_s"]
 
     return fit
 
@@ -145,7 +146,7 @@ def _fit_paper_network(c: _FitContext):
         check_every=50_000,
         key=jax.random.key(11),
     )
-    return NetworkEstimator(res.network, c.joint), time.perf_counter() - t0
+    return NetworkEstimator(res.value, c.joint), time.perf_counter() - t0
 
 
 def _fit_hybrid(with_plant: bool):
@@ -161,7 +162,7 @@ def _fit_hybrid(with_plant: bool):
         res = fit_hybrid(
             model, inp, steps=c.steps, learning_rate=1e-2, batch_size=1024, key=jax.random.key(21)
         )
-        est = HybridEstimator(res.model, hybrid_ls, c.joint, tuple(options.items()))
+        est = HybridEstimator(res.value, hybrid_ls, c.joint, tuple(options.items()))
         return est, time.perf_counter() - t0 + hybrid_ls_s  # the closed-form start counts too
 
     return fit

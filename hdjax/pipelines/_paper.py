@@ -28,6 +28,7 @@ from ..compliance import (
     estimate_torque,
 )
 from ..config._schema import model_of
+from . import _streamed as S
 
 PAPER_MS_PER_100 = {"model": 9.232, "network": 25.442}
 """Song et al. Section IV.B: time to estimate 100 torques on an i7-7700H [ms]."""
@@ -59,7 +60,10 @@ PAPER_ERRORS = {
 def current_scale(cfg: dict, train: list[Recording]) -> float:
     """The `[model] current_scale`, with `"auto"` = the largest |current| in the training data."""
     value = cfg["model"]["current_scale"]
-    peak = max(float(np.max(np.abs(np.asarray(r.current)))) for r in train)
+    if isinstance(train, RecordingStream):  # streamed parts know their peak from the build pass
+        peak = train.peak_current
+    else:
+        peak = max(float(np.max(np.abs(np.asarray(r.current)))) for r in train)
     if value == "auto":
         return peak if peak > 0 else 1.0
     value = float(value)
@@ -82,12 +86,14 @@ def stacked_signals(model, recordings: list[Recording]):
 
 
 def calibrate(cfg: dict, model, train: list[Recording], warn=None):
-    """Calibrate by the `[fit]` method; returns a [`hdjax.compliance.CalibrationResult`][].
+    """Calibrate by the `[fit]` method; returns the calibration's [`hdjax.Solution`][].
 
     Warnings (terms the data cannot reach) go to `warn` (a callable) when given.
     """
     fit = cfg["fit"]
-    data = None if fit.get("chunk") and fit["method"] == "lstsq" else stacked_signals(model, train)
+    streamed = isinstance(train, RecordingStream)  # a StreamedDataset's parts, read in chunks
+    chunked = streamed or (fit.get("chunk") and fit["method"] == "lstsq")
+    data = None if chunked else stacked_signals(model, train)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if fit["method"] == "rls":
@@ -99,7 +105,7 @@ def calibrate(cfg: dict, model, train: list[Recording], warn=None):
                 init_samples=fit["init_samples"] or None,
             )
         elif data is None:
-            stream = RecordingStream.from_recordings(train, fit["chunk"])
+            stream = train if streamed else RecordingStream.from_recordings(train, fit["chunk"])
             result = calibrate_stream(model, stream, chunk=fit["chunk"], throw=False)
         else:
             result = calibrate_lstsq(model, data, throw=False)
@@ -109,14 +115,25 @@ def calibrate(cfg: dict, model, train: list[Recording], warn=None):
 
 
 def estimate_model(model, recordings: dict[str, Recording]) -> dict:
-    """Torque estimates of a calibrated model on each recording (name -> TorqueEstimate)."""
-    return {name: estimate_torque(model, rec) for name, rec in recordings.items()}
+    """Torque estimates of a calibrated model on each recording (name -> TorqueEstimate, or a
+    `StreamedEstimate` for a streamed part)."""
+    return {
+        name: (
+            S.estimate_model_streamed(model, rec, rec.n_samples, rec.chunk)
+            if isinstance(rec, RecordingStream)
+            else estimate_torque(model, rec)
+        )
+        for name, rec in recordings.items()
+    }
 
 
 def metrics_of(estimates: dict, recordings: dict[str, Recording], rated: float) -> dict:
     """name -> error metrics dict (rms, max, bias, rms_pct, max_pct, n), over all samples."""
     out = {}
     for name, est in estimates.items():
+        if isinstance(est, S.StreamedEstimate):  # errors summed chunk by chunk
+            out[name] = est.errors.as_dict(rated, in_range=est.in_range)
+            continue
         torque = est.torque if hasattr(est, "torque") else est
         m = error_metrics(torque, recordings[name].column("torque"), rated).as_dict()
         if hasattr(est, "in_range"):
@@ -149,23 +166,28 @@ def train_network(cfg: dict, joint: Joint, train: list[Recording], seed: int, va
     never straddle two recordings.
     """
     n_cfg = cfg["network"]
-    feats = [
-        nw.build_features(
-            r,
-            joint,
-            periodic=n_cfg["periodic"],
-            orders=tuple(n_cfg["orders"]),
-            kalman=n_cfg["kalman"],
+    if isinstance(train, RecordingStream):  # features chunk by chunk, the Kalman state carried
+        x, y, layout = S.training_rows(
+            train, joint, train.n_samples, n_cfg["max_train_samples"], n_cfg
         )
-        for r in train
-    ]
-    x = np.concatenate([np.asarray(f.x) for f in feats])
-    y = np.concatenate([np.asarray(r.column("torque")) for r in train])
-    stride = max(1, -(-x.shape[0] // n_cfg["max_train_samples"]))
-    x, y = x[::stride], y[::stride]
+    else:
+        feats = [
+            nw.build_features(
+                r,
+                joint,
+                periodic=n_cfg["periodic"],
+                orders=tuple(n_cfg["orders"]),
+                kalman=n_cfg["kalman"],
+            )
+            for r in train
+        ]
+        x = np.concatenate([np.asarray(f.x) for f in feats])
+        y = np.concatenate([np.asarray(r.column("torque")) for r in train])
+        stride = max(1, -(-x.shape[0] // n_cfg["max_train_samples"]))
+        x, y, layout = x[::stride], y[::stride], feats[0].layout
     key = jax.random.PRNGKey(seed)
     k_init, k_train = jax.random.split(key)
-    net = nw.Network(feats[0].layout, tuple(n_cfg["hidden"]), key=k_init)
+    net = nw.Network(layout, tuple(n_cfg["hidden"]), key=k_init)
     t0 = time.perf_counter()
     if n_cfg["trainer"] == "backprop":
         res = nw.train_backprop(
@@ -190,23 +212,45 @@ def train_network(cfg: dict, joint: Joint, train: list[Recording], seed: int, va
             batch_size=n_cfg["batch_size"] or None,
         )
     fit_s = time.perf_counter() - t0
-    hist = np.asarray(res.history)
+    hist = np.asarray(res.stats["history"])
     info = {
         "trainer": n_cfg["trainer"],
         "hidden": list(n_cfg["hidden"]),
-        "n_parameters": int(res.network.n_parameters),
+        "n_parameters": int(res.value.n_parameters),
         "train_samples": int(x.shape[0]),
-        "steps": int(res.steps),
+        "steps": int(res.stats["steps"]),
         "final_loss": float(hist[-1]) if hist.size else float("nan"),
         "fit_s": fit_s,
-        "layout": list(res.network.layout.names),
+        "layout": list(res.value.layout.names),
     }
-    return res.network, info
+    return res.value, info
 
 
 def estimate_network(net, joint: Joint, recordings: dict[str, Recording]) -> dict:
-    """Torque estimates of a trained network on each recording (name -> array)."""
-    return {name: nw.predict_torque(net, rec, joint) for name, rec in recordings.items()}
+    """Torque estimates of a trained network on each recording (name -> array, or a
+    `StreamedEstimate` for a streamed part)."""
+    return {
+        name: (
+            S.estimate_network_streamed(net, joint, rec, rec.n_samples)
+            if isinstance(rec, RecordingStream)
+            else nw.predict_torque(net, rec, joint)
+        )
+        for name, rec in recordings.items()
+    }
+
+
+def figure_series(est, rec) -> tuple:
+    """`(t, measured, estimated, errors)` for a torque figure: the whole recording, or the
+    samples a streamed estimate kept with its `(rms, max)` over every sample."""
+    if isinstance(est, S.StreamedEstimate):
+        return est.t, est.measured, est.torque, (est.errors.rms, est.errors.peak)
+    torque = est.torque if hasattr(est, "torque") else est
+    return np.asarray(rec.t), np.asarray(rec.column("torque")), np.asarray(torque), None
+
+
+def first_samples(rec, n: int) -> Recording:
+    """The first `n` samples of a recording or of a streamed part (for the timing)."""
+    return S.head(rec, n) if isinstance(rec, RecordingStream) else rec
 
 
 # ---------------------------------------------------------------------------------------------

@@ -81,7 +81,7 @@ def periodic_features_effect(
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             ls = hc.calibrate_lstsq(structure, (sig, jnp.concatenate([r.torque for r in train])))
-        ls = ls.model
+        ls = ls.value
         scales = dahl_scales(ls)
         for periodic in (False, True):
             feats = hn.build_features(train_all, joint, periodic=periodic)
@@ -112,9 +112,9 @@ def periodic_features_effect(
                     learning_rate=1e-2,
                     batch_size=1024,
                     key=jax.random.key(21 + seed),
-                ).model
+                ).value
                 estimators = {
-                    "network": NetworkEstimator(res.network, joint),
+                    "network": NetworkEstimator(res.value, joint),
                     "residual": HybridEstimator(hyb, ls, joint, tuple(residual_options.items())),
                 }
                 for name, estimator in estimators.items():

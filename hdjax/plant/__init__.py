@@ -22,7 +22,6 @@ from ._dynamics import (
 from ._effects import EFFECT_NAMES as EFFECT_NAMES, make_effect as make_effect
 from ._figures import plot_scenario as plot_scenario
 from ._identify import (
-    PlantFit as PlantFit,
     fit_plant as fit_plant,
     simulate_signals as simulate_signals,
 )

@@ -19,7 +19,9 @@ $d = \Delta\theta_f(T_s) + \Delta\theta_{wg}(T_s/N)/N + b(T_s) + \theta_{err}
 + \beta\Delta\vartheta$
 
 with $\Delta\theta_f$ the flexspline compliance (eq. (7), scaled by $1 + \alpha\Delta\vartheta$
-under `temperature`), $\Delta\theta_{wg}$ the wave-generator polynomial (eq. (8) in the WG torque),
+under `temperature`; the whole elastic part $G$ scaled by $1 + \varepsilon(\theta)$ under a
+compliance ripple, `ripple_m`/`ripple_l`), $\Delta\theta_{wg}$ the wave-generator polynomial
+(eq. (8) in the WG torque),
 $b$ the lost motion (`backlash`), $\theta_{err}$ the kinematic error (eq. (9), harmonics of the
 recorded angles). It is inverted for the elastic torque $T_s$ (closed form, eq. (27), when only
 the piecewise flexspline is on; a few Newton steps otherwise). The transmitted torque is
@@ -292,6 +294,21 @@ def kinematic_error(
     return err
 
 
+def _ripple_stiffness(params: PlantParams, state: PlantState, inv):
+    r"""$1/(1 + \sum\varepsilon)$ of the compliance ripples (`compliance_ripple_*` slots), of the
+    recorded angles $-\theta_m$, $-\theta_l$; 1.0 without one. The series compliance is scaled
+    by $1 + \varepsilon$, so $G(T_s) = d_{eff}/(1 + \varepsilon)$."""
+    change = None
+    for slot, angle in (
+        ("compliance_ripple_m", -state.theta_m),
+        ("compliance_ripple_l", -state.theta_l),
+    ):
+        for name in _slot(params, slot):
+            eff, ie = _eff(params, inv, name)
+            change = eff(angle, ie) if change is None else change + eff(angle, ie)
+    return 1.0 if change is None else 1.0 / (1.0 + change)
+
+
 def effective_deflection(params: PlantParams, state: PlantState, *, inv=None):
     r"""$d_{eff} = d - \theta_{err} - \beta\Delta\vartheta$: the deflection the springs carry."""
     inv = _inv(params, inv)
@@ -342,7 +359,9 @@ def flexspline_torque(params: PlantParams, state: PlantState, *, inv=None):
     """
     inv = _inv(params, inv)
     d_eff = effective_deflection(params, state, inv=inv)
-    torque = elastic_torque(params, d_eff, state.temperature, inv=inv)
+    torque = elastic_torque(
+        params, d_eff * _ripple_stiffness(params, state, inv), state.temperature, inv=inv
+    )
     for name in _slot(params, "spring"):
         torque = torque + params.effects[name].torque(d_eff)
     d_dot = state.omega_m * inv["ratio"] - state.omega_l

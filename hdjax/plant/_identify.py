@@ -14,6 +14,8 @@ horizon while the simulation itself stays one continuous run.
 
 from __future__ import annotations
 
+import time
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -23,30 +25,12 @@ import optimistix as optx
 
 from .._errors import ConfigError
 from .._recording import Recording
+from .._solution import RESULTS, Solution
 from ._controller import ControllerGains
 from ._dynamics import PlantState
 from ._effects import _concrete
 from ._params import PlantParams
 from ._simulate import Drive, _initial, check_step, integrate
-
-
-class PlantFit(eqx.Module):
-    """Result of a plant fit.
-
-    **Arguments:**
-
-    - `params`: the fitted [`hdjax.plant.PlantParams`][].
-    - `names`: the fitted parameter paths.
-    - `values`: their fitted values, one array per name.
-    - `loss`: final mean squared scaled residual.
-    - `steps`: iterations taken.
-    """
-
-    params: PlantParams
-    names: tuple[str, ...] = eqx.field(static=True)
-    values: tuple
-    loss: jax.Array
-    steps: int = eqx.field(static=True)
 
 
 def _parse(path: str):
@@ -162,7 +146,7 @@ def fit_plant(
     state0: PlantState | None = None,
     rtol: float = 1e-8,
     atol: float = 1e-8,
-) -> PlantFit:
+) -> Solution:
     r"""Fit the named plant parameters so the simulated bench matches the recording.
 
     **Arguments:**
@@ -182,8 +166,13 @@ def fit_plant(
     - `state0`: initial state (default: equilibrium at the start, as `simulate` uses).
     - `rtol`, `atol`: Levenberg-Marquardt tolerances.
 
-    **Returns:** a [`hdjax.plant.PlantFit`][].
+    **Returns:** an [`hdjax.Solution`][] whose `value` is the fitted
+    [`hdjax.plant.PlantParams`][]; `stats` holds `names` (the fitted parameter paths),
+    `values` (their fitted values, one array per name), `loss` (final mean squared scaled
+    residual), `steps` and `fit_time_s`. The result is `RESULTS.max_steps_reached` when
+    Levenberg-Marquardt stopped at `steps` before its tolerance.
     """
+    t0 = time.perf_counter()
     names = tuple(names)
     _check_names(params, names)
     check_step(params, dt)
@@ -211,6 +200,7 @@ def fit_plant(
         sol = optx.least_squares(residuals, solver, u0, max_steps=steps, throw=False)
         u = sol.value
         n_steps = int(sol.stats["num_steps"])
+        result = RESULTS.successful if sol.result == optx.RESULTS.successful else None
     else:
         opt = optax.adam(learning_rate)
         loss_fn = lambda u: jnp.mean(residuals(u, None) ** 2)
@@ -228,7 +218,11 @@ def fit_plant(
             for _ in range(steps):
                 u, state, _ = update(u, state)
         n_steps = steps
+        result = RESULTS.successful
     values = tuple(b * jnp.exp(ui) for b, ui in zip(base, u))
     fitted = _with_values(params, names, values)
     loss = jnp.mean(residuals(u, None) ** 2)
-    return PlantFit(params=fitted, names=names, values=values, loss=loss, steps=n_steps)
+    stats = dict(
+        names=names, values=values, loss=loss, steps=n_steps, fit_time_s=time.perf_counter() - t0
+    )
+    return Solution(fitted, RESULTS.max_steps_reached if result is None else result, stats)

@@ -258,6 +258,8 @@ def stiffest_modes(params: PlantParams) -> dict[str, complex]:
     m_inv = 1.0 / jl + 1.0 / (n * n * jm)
     k = 1.0 / float(np.min(np.asarray(_concrete(params.compliance))))
     e = params.effects
+    for name in in_slot(e, "compliance_ripple_m") + in_slot(e, "compliance_ripple_l"):
+        k /= 1.0 - _num(e[name].max_change())  # a ripple stiffens the joint where it dips
     for name in in_slot(e, "hysteresis"):
         k += _num(e[name].initial_stiffness())
     if "stiffening" in e:

@@ -31,11 +31,14 @@ def _envelope(err: np.ndarray, limit: int = 6000) -> np.ndarray:
     return np.unique(np.concatenate([starts, peaks]))
 
 
-def torque_figure(t, measured, estimated, *, title: str, rated: float | None = None) -> bytes:
+def torque_figure(
+    t, measured, estimated, *, title: str, rated: float | None = None, errors=None
+) -> bytes:
     """Estimated against measured torque with the error below (as Song et al. Figs. 9-16).
 
     **Arguments:** `t` [s], `measured` and `estimated` torque [N·m]; `title`; `rated` torque
-    [N·m] for a secondary error axis in % of rated torque.
+    [N·m] for a secondary error axis in % of rated torque; `errors`, the `(rms, max)` error
+    over every sample when the arrays are already decimated (a streamed run).
 
     **Returns:** PNG bytes.
     """
@@ -57,6 +60,8 @@ def torque_figure(t, measured, estimated, *, title: str, rated: float | None = N
     ax2.plot(t[s], err[s], color="tab:blue", lw=0.8)
     ax2.axhline(0.0, color="gray", lw=0.6)
     rms, mx = float(np.sqrt(np.mean(err**2))), float(np.max(np.abs(err)))
+    if errors is not None:
+        rms, mx = (float(v) for v in errors)
     ax2.set_ylabel("error [N·m]")
     ax2.set_xlabel("time [s]")
     ax2.grid(alpha=0.3)

@@ -2,4 +2,3 @@
 
 from ._backprop import backprop_step as backprop_step, train_backprop as train_backprop
 from ._optax import train_optax as train_optax
-from ._result import TrainResult as TrainResult

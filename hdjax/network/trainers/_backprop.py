@@ -19,6 +19,8 @@ network an order of magnitude faster.
 
 from __future__ import annotations
 
+import time
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -26,8 +28,9 @@ import numpy as np
 
 from ..._custom_types import PRNGKeyArray
 from ..._errors import ConfigError, DivergenceError
+from ..._solution import Solution
 from .._mlp import Network
-from ._result import TrainResult, check_count, check_rate, prepare
+from ._result import check_count, check_rate, prepare, train_solution
 
 _DIVERGENCE_FACTOR = 100.0
 
@@ -109,7 +112,7 @@ def train_backprop(
     x_val=None,
     y_val=None,
     normalise: bool = True,
-) -> TrainResult:
+) -> Solution:
     r"""Train a network by the paper's per-sample back-propagation (Song et al. eqs. (36)-(46)).
 
     **Arguments:**
@@ -126,11 +129,14 @@ def train_backprop(
     - `x_val`, `y_val`: optional validation data, reported as RMS error [N·m].
     - `normalise`: set the network's stored normalisation from `x`, `y` first.
 
-    **Returns:** a [`hdjax.network.TrainResult`][].
+    **Returns:** an [`hdjax.Solution`][] with the trained network in `value` and the stats of
+    [`hdjax.network.train_optax`][]; `RESULTS.max_steps_reached` when a positive
+    `error_target` was not reached in `max_learnings`.
 
     **Raises:** [`hdjax.DivergenceError`][] naming `mu` and `eta` when the global error becomes
     non-finite or grows 100-fold; [`hdjax.DataError`][] on NaN or a constant target.
     """
+    t0 = time.perf_counter()
     mu = check_rate("mu", mu)
     eta = check_rate("eta", eta)
     check_every = check_count("check_every", check_every)
@@ -162,10 +168,12 @@ def train_backprop(
             f"for this network; try mu={mu / 10:g}, eta={eta / 10:g}"
         )
     trained = eqx.tree_at(lambda n: (n.weights, n.biases), network, (weights, biases))
-    return TrainResult(
-        network=trained,
+    return train_solution(
+        trained,
         history=hist[:i],
         val_rmse=vhist[:i] * (float(network.y_scale) if x_val is not None else np.nan),
         steps=i * check_every,
-        stopped="target" if err <= error_target else "max_steps",
+        target=error_target > 0,
+        reached=err <= error_target,
+        t0=t0,
     )

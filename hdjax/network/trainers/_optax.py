@@ -8,6 +8,7 @@ error reaches `target_rmse` or when the loss diverges.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 import equinox as eqx
@@ -18,8 +19,9 @@ import optax
 
 from ..._custom_types import PRNGKeyArray
 from ..._errors import ConfigError, DivergenceError
+from ..._solution import Solution
 from .._mlp import Network
-from ._result import TrainResult, check_count, check_rate, prepare
+from ._result import check_count, check_rate, prepare, train_solution
 
 _OPTIMIZERS: dict[str, Callable[[float], optax.GradientTransformation]] = {
     "adam": optax.adam,
@@ -89,7 +91,7 @@ def train_optax(
     y_val=None,
     target_rmse: float | None = None,
     normalise: bool = True,
-) -> TrainResult:
+) -> Solution:
     r"""Train a network by an optax optimiser, jitted, full batch or minibatch.
 
     **Arguments:**
@@ -107,12 +109,14 @@ def train_optax(
       validation RMS error reaches it.
     - `normalise`: set the network's stored normalisation from `x`, `y` first.
 
-    **Returns:** a [`hdjax.network.TrainResult`][]; `history` holds the training MSE of the
-    standardised torque at each check.
+    **Returns:** an [`hdjax.Solution`][] with the trained network in `value`; `stats["history"]`
+    holds the training MSE of the standardised torque at each check, `stats["val_rmse"]` the
+    validation RMS error [N·m]; `RESULTS.max_steps_reached` when `target_rmse` was not reached.
 
     **Raises:** [`hdjax.DivergenceError`][] naming the learning rate when the loss becomes
     non-finite or grows 100-fold.
     """
+    t0 = time.perf_counter()
     lr = check_rate("learning_rate", learning_rate)
     steps = check_count("steps", steps)
     eval_every = check_count("eval_every", min(eval_every, steps))
@@ -160,10 +164,12 @@ def train_optax(
             f"learning rate {lr:g} is too large; try learning_rate={lr / 10:g}"
         )
     trained = eqx.tree_at(lambda n: (n.weights, n.biases), network, trainable)
-    return TrainResult(
-        network=trained,
+    return train_solution(
+        trained,
         history=hist[:i],
         val_rmse=vhist[:i] * (y_scale if x_val is not None else np.nan),
         steps=i * eval_every,
-        stopped="target" if float(vrmse) <= target else "max_steps",
+        target=target_rmse is not None,
+        reached=float(vrmse) <= target,
+        t0=t0,
     )

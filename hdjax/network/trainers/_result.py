@@ -3,34 +3,34 @@
 from __future__ import annotations
 
 import math
+import time
 
-import equinox as eqx
 import numpy as np
 
-from ..._custom_types import Array, Float
 from ..._errors import ConfigError
+from ..._solution import RESULTS, Solution
 from .._features import check_training_data
 from .._mlp import Network, standardise
 
 
-class TrainResult(eqx.Module):
-    """A trained network and how the training went.
+def train_solution(network: Network, history, val_rmse, steps: int, target, reached, t0):
+    """What a trainer returns: an [`hdjax.Solution`][] with the trained network in `value`.
 
-    **Fields:**
-
-    - `network`: the trained [`hdjax.network.Network`][].
-    - `history`: training loss at each check (standardised units: the mean squared error of the
-      torque divided by its variance, halved for back-propagation as eq. (42)).
-    - `val_rmse`: validation RMS error [N·m] at each check (NaN without validation data).
-    - `steps`: learnings (back-propagation) or optimiser steps taken.
-    - `stopped`: why training stopped: `"target"` (error target reached) or `"max_steps"`.
+    `stats` holds `history` (training loss at each check, standardised units: the mean squared
+    error of the torque divided by its variance, halved for back-propagation as eq. (42)),
+    `val_rmse` (validation RMS error [N·m] at each check, NaN without validation data),
+    `steps` (learnings or optimiser steps taken), `target_reached` and `fit_time_s`. The
+    result is `RESULTS.max_steps_reached` when an error `target` was set and not `reached`.
     """
-
-    network: Network
-    history: Float[Array, " n_checks"]
-    val_rmse: Float[Array, " n_checks"]
-    steps: int = eqx.field(static=True)
-    stopped: str = eqx.field(static=True)
+    result = RESULTS.max_steps_reached if target and not reached else RESULTS.successful
+    stats = dict(
+        history=history,
+        val_rmse=val_rmse,
+        steps=int(steps),
+        target_reached=bool(reached),
+        fit_time_s=time.perf_counter() - t0,
+    )
+    return Solution(network, result, stats)
 
 
 def check_rate(name: str, value) -> float:

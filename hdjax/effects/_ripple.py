@@ -1,0 +1,226 @@
+r"""Compliance ripple: the joint's stiffness varies with the wave-generator or the output angle.
+
+The elliptical wave generator pushes the flexspline's teeth into the circular spline at its two
+lobes; as it turns, the number of teeth in contact and the flexspline's bending change twice per
+revolution, so the torsional compliance is modulated at two per motor revolution (and its
+harmonics). An eccentric output bearing or flexspline modulates it once per output revolution.
+Unlike the kinematic error (a twist offset, [`hdjax.effects.Harmonics`][]), the ripple scales
+with the load: at compliance $k(\theta) = k\,(1 + \varepsilon(\theta))$,
+$\varepsilon(\theta) = \sum_j a_j \sin(K_j\theta + \varphi_j)$, the twist gains
+$\varepsilon(\theta)\,k\,T$.
+
+- **Plant** (`ripple_m`, `ripple_l`): the series compliance budget $G(T)$ of the joint (the
+  flexspline, the wave generator, the lost motion) is scaled by $1 + \varepsilon(\theta)$ of the
+  recorded motor or load angle, so the elastic torque solves $G(T_s) = d_{eff}/(1 + \varepsilon)$.
+  The defaults are a 3 % ripple at 2 per motor revolution.
+- **Term** (`Ripple`): the pair $T/\tau_0 \cdot \sin K\theta$, $T/\tau_0 \cdot \cos K\theta$,
+  linear in torque and so inverted in closed form (the slope is
+  $u(\theta) = (c_s \sin K\theta + c_c \cos K\theta)/\tau_0$).
+- **Candidates** (`ripple:theta_m:K`, `ripple:theta_l:K`): the orders come from the order
+  spectrum of residual $\div$ torque (samples with a small torque left out, where the ratio is
+  noise), merged with the named orders (2 and 4 per motor revolution, 1 and 2 per output
+  revolution). An order is offered only when the angle turns through at least
+  `ripple_min_periods` (3) of its periods: over fewer, $T \sin K\theta$ is nearly a smooth
+  function of the torque path (with the link held, the motor angle follows the twist) and
+  stands in for compliance structure that is no ripple.
+
+References: Tuttle and Seering, "A nonlinear model of a harmonic drive gear transmission",
+IEEE Trans. Robotics and Automation 12(3), 1996 (the compliance and its variation with the
+wave-generator angle); Song et al. 2019, eq. (7) (the compliance that the ripple modulates).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .. import _trig
+from .._custom_types import Array, Float
+from .._errors import ConfigError
+from .._trig import sincos
+from ._base import (
+    AbstractFamily,
+    AbstractLinearTorqueTerm,
+    AbstractPlantEffect,
+    Candidate,
+    PlantEffect,
+    check_positive,
+    concrete,
+    fmt,
+    require,
+    vector,
+)
+
+MAX_RIPPLE = 0.5
+"""Largest total relative ripple $\\sum_j a_j$ the plant accepts (the compliance stays positive)."""
+
+
+def ripple_key(signal: str, order: float) -> str:
+    """The vocabulary key of a compliance ripple of one order of one angle."""
+    return f"ripple:{signal}:{fmt(round(order, 6))}"
+
+
+class Ripple(AbstractLinearTorqueTerm):
+    r"""Compliance modulated by one harmonic of an angle: $T/\tau_0 \cdot (\sin K\theta,
+    \cos K\theta)$, linear in torque.
+
+    **Arguments:** `signal` (`"theta_m"` or `"theta_l"`), `order` $K$, `torque_scale` $\tau_0$
+    (the rated torque, so the coefficients are twists at rated torque).
+    """
+
+    signal: str = eqx.field(default="theta_m", static=True)
+    order: float = eqx.field(default=2.0, static=True)
+    torque_scale: float = eqx.field(default=1.0, static=True)
+
+    def __check_init__(self):
+        check_positive("Ripple", "order", self.order)
+        check_positive("Ripple", "torque_scale", self.torque_scale)
+
+    @property
+    def key(self) -> str:
+        return ripple_key(self.signal, self.order)
+
+    def names(self) -> tuple[str, ...]:
+        k, s, t = fmt(self.order), self.signal, fmt(self.torque_scale)
+        return (f"T/{t}*sin({k}*{s})", f"T/{t}*cos({k}*{s})")
+
+    def torque_slope(self, sig):
+        s, c = sincos(self.order * sig.get(self.signal))
+        return jnp.stack([s, c], axis=1) * (1.0 / self.torque_scale)
+
+    def numpy_torque_slope(self, sig) -> np.ndarray:
+        th = self.order * np.asarray(sig.get(self.signal))
+        return np.column_stack([np.sin(th), np.cos(th)]) / self.torque_scale
+
+
+class ComplianceRipple(AbstractPlantEffect):
+    r"""Relative change of the joint's compliance, $\varepsilon(\theta) = \sum_j a_j
+    \sin(K_j\theta + \varphi_j)$, of one recorded angle (motor for `ripple_m`, load for
+    `ripple_l`); the plant scales the series compliance by $1 + \varepsilon$.
+
+    **Arguments:** `orders` $K_j$, `amplitudes` $a_j$ (fractions of the compliance, e.g. 0.03;
+    their sum below 0.5), `phases` $\varphi_j$ [rad], each of shape `(n,)`.
+    """
+
+    orders: Float[Array, " n"]
+    amplitudes: Float[Array, " n"]
+    phases: Float[Array, " n"]
+
+    def reciprocals(self):
+        return {}
+
+    def __call__(self, angle, inv=None):
+        terms = [
+            self.amplitudes[j] * _trig.sin(self.orders[j] * angle + self.phases[j])
+            for j in range(self.orders.shape[0])
+        ]
+        return sum(terms[1:], terms[0]) if terms else jnp.zeros_like(angle)
+
+    def max_change(self):
+        """$\\sum_j |a_j|$, the largest relative change (the integrator's stiffness check)."""
+        return jnp.sum(jnp.abs(self.amplitudes))
+
+
+def _build(name: str, p: dict) -> ComplianceRipple:
+    orders = vector(name, "orders", p["orders"])
+    amps = vector(name, "amplitudes", p["amplitudes"])
+    phases = vector(name, "phases", p["phases"])
+    n = orders.shape
+    require(name, "orders", orders, positive=True, shape=n)
+    require(name, "amplitudes", amps, nonneg=True, shape=n)
+    require(name, "phases", phases, shape=n)
+    total = concrete(amps)
+    if total is not None and not float(np.sum(total)) < MAX_RIPPLE:
+        raise ConfigError(
+            f"effect {name!r}: the amplitudes are fractions of the compliance and must sum to "
+            f"less than {MAX_RIPPLE} (a compliance ripple is a few %), got {total.tolist()}"
+        )
+    return ComplianceRipple(orders, amps, phases)
+
+
+def torque_ratio(residual, torque, rated_torque):
+    r"""Residual $\div$ torque where the torque is large enough for the ratio to mean something.
+
+    Samples with $|T| < \max(0.05\,\tau_0, 0.3\,\mathrm{RMS}(T))$ are left out (near zero torque
+    the ratio is noise over a small number). **Returns:** `(ratio, keep)`, `keep` the boolean
+    mask of the samples used (`ratio` has `keep.sum()` entries).
+    """
+    t = np.asarray(torque, np.float64)
+    guard = max(0.05 * float(rated_torque), 0.3 * float(np.sqrt(np.mean(t * t))))
+    keep = np.abs(t) >= guard
+    return np.asarray(residual, np.float64)[keep] / t[keep], keep
+
+
+MIN_RATIO_SAMPLES = 200
+"""Fewest samples with a usable torque for the residual ÷ torque spectrum (else named orders
+only)."""
+
+
+class RippleFamily(AbstractFamily):
+    """Compliance ripple: plant `ripple_m`, `ripple_l`; term `Ripple`; orders from the spectrum
+    of residual ÷ torque (`ripple:theta_m:ORDER`, `ripple:theta_l:ORDER`)."""
+
+    name: ClassVar[str] = "ripple"
+    terms: ClassVar[tuple] = (Ripple,)
+    plant_effects: ClassVar[tuple] = (
+        PlantEffect(
+            "ripple_m",
+            "compliance_ripple_m",
+            lambda rated, k1, given: dict(orders=[2.0], amplitudes=[0.03], phases=[0.4]),
+            _build,
+        ),
+        PlantEffect(
+            "ripple_l",
+            "compliance_ripple_l",
+            lambda rated, k1, given: dict(orders=[1.0], amplitudes=[0.03], phases=[0.0]),
+            _build,
+        ),
+    )
+    discover_families: ClassVar[tuple] = ("ripple:theta_m", "ripple:theta_l")
+    vocabulary: ClassVar[str] = "ripple:theta_m:ORDER, ripple:theta_l:ORDER"
+    options: ClassVar[dict] = {
+        "ripple_orders_m": (0.5, 8.0),
+        # the output side's ripple sources (an eccentric bearing or flexspline) are low orders;
+        # a high order of a partial swing under a gravity-like load is a function of the torque
+        # path and stands in for compliance structure that is no ripple
+        "ripple_orders_l": (0.5, 4.0),
+        "ripple_named_orders_m": (2.0, 4.0),
+        "ripple_named_orders_l": (1.0, 2.0),
+        "ripple_n_peaks": 2,
+        "ripple_min_periods": 3.0,
+    }
+
+    def candidates(self, ctx):
+        existing = {"theta_m": [], "theta_l": []}
+        for term in ctx.existing_terms:
+            if isinstance(term, Ripple):
+                existing[term.signal].append(term.order)
+        ratio, keep = torque_ratio(ctx.residual, ctx.torque, ctx.rated_torque)
+        out = []
+        for signal, suffix in (("theta_m", "m"), ("theta_l", "l")):
+            if f"ripple:{signal}" not in ctx.families:
+                continue
+            # too few samples with a usable torque: the named orders only
+            enough = keep.sum() >= MIN_RATIO_SAMPLES
+            lo, hi = ctx.option(self, f"ripple_orders_{suffix}")
+            span = float(np.ptp(np.asarray(ctx.sig.get(signal))))
+            if span <= 0.0:
+                continue
+            lo = max(lo, ctx.option(self, "ripple_min_periods") * 2.0 * math.pi / span)
+            orders = ctx.spectrum_orders(
+                signal,
+                (lo, hi),
+                list(ctx.option(self, f"ripple_named_orders_{suffix}")),
+                existing[signal],
+                ctx.option(self, "ripple_n_peaks") if enough else 0,
+                residual=ratio if enough else np.asarray(ctx.residual),
+                where=keep if enough else None,
+            )
+            for k, origin in orders:
+                term = Ripple(signal, float(round(k, 6)), float(ctx.rated_torque))
+                out.append(Candidate(term.key, f"ripple:{signal}", term, origin))
+        return out
