@@ -55,8 +55,11 @@ def main():
             "--out", str(tmp / "out"), "--no-cache", "--quiet",
         ]  # fmt: skip
         t0 = time.perf_counter()
+        c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True)
         wall = time.perf_counter() - t0
+        c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (c1.ru_utime + c1.ru_stime) - (c0.ru_utime + c0.ru_stime)
         peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6
         report = (
             json.loads((tmp / "out" / "report.json").read_text()) if not proc.returncode else {}
@@ -78,6 +81,7 @@ def main():
             exit_code=proc.returncode,
             stderr_tail=proc.stderr[-500:],
             wall_s=wall,
+            cpu_s=cpu,
             peak_rss_gb=peak,
             effects=sorted(found),
             expected_found=sorted(EXPECTED & found),

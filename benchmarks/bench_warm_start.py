@@ -11,6 +11,7 @@ cache lives in a temporary XDG_CACHE_HOME, deleted afterwards.
 import argparse
 import json
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -40,12 +41,18 @@ print(json.dumps({"code": code, "compiles": compiles, "hits": len(hits)}))
 """
 
 
+def _children_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def run(args, env):
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _children_cpu()
     out = subprocess.run(
         [sys.executable, "-c", PROBE, *args], cwd=REPO, env=env, capture_output=True, text=True
     )
     wall = time.perf_counter() - t0
+    cpu = _children_cpu() - c0
     if out.returncode not in (0,):
         raise SystemExit(out.stderr[-3000:])
     probe = json.loads(out.stdout.strip().splitlines()[-1])
@@ -54,6 +61,8 @@ def run(args, env):
     c = probe["compiles"]
     return {
         "wall_s": wall,
+        # the child's process time (all its threads): the work done, whatever the machine's load
+        "cpu_s": cpu,
         "exit_code": probe["code"],
         # JAX's backend-compile event times a compilation or, on a hit, the cache load
         "n_compile_events": len(c),

@@ -8,11 +8,13 @@ network's features, the hybrid and joint fits and the residual loop all start fr
 
 from __future__ import annotations
 
+import typing
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ._custom_types import Array, Float
+from ._custom_types import Array, ArrayLike, Float, Int
 from ._errors import DataError
 from ._joint import Joint
 from ._recording import Recording
@@ -26,7 +28,12 @@ def _twist(theta_m, theta_l, ratio, sign):
     return sign * (theta_l - theta_m / ratio)
 
 
-def twist(theta_m, theta_l, ratio: float, sign: float = 1.0) -> Float[Array, " n"]:
+def twist(
+    theta_m: Float[ArrayLike, " n"],
+    theta_l: Float[ArrayLike, " n"],
+    ratio: float,
+    sign: float = 1.0,
+) -> Float[Array, " n"]:
     r"""Total torsional angle of the reducer, Song et al. eq. (5).
 
     $\Delta\theta = \theta_{fso} - \theta_{wgi} / N$, computed in float64 (a twist of one
@@ -46,7 +53,9 @@ def _backward_difference(t, theta):
     return jnp.concatenate([v[:1], v])
 
 
-def finite_difference_velocity(t, theta) -> Float[Array, " n"]:
+def finite_difference_velocity(
+    t: Float[ArrayLike, ...], theta: Float[ArrayLike, ...]
+) -> Float[Array, " n"]:
     r"""Angular velocity by the paper's backward difference, Song et al. eqs. (13)-(14).
 
     $\omega_k = (\theta_k - \theta_{k-1}) / (t_k - t_{k-1})$ with the actual time stamps (so
@@ -80,7 +89,9 @@ def _local_slope(t, theta, half_window: int):
     return num / den
 
 
-def smoothed_velocity(t, theta, half_window: int = 5) -> Float[Array, " n"]:
+def smoothed_velocity(
+    t: Float[ArrayLike, ...], theta: Float[ArrayLike, ...], half_window: int = 5
+) -> Float[Array, " n"]:
     """Angular velocity by a local least-squares line over `2*half_window+1` samples.
 
     A smoothing alternative to eqs. (13)-(14) that uses the actual (jittered) time stamps; its
@@ -98,7 +109,7 @@ def smoothed_velocity(t, theta, half_window: int = 5) -> Float[Array, " n"]:
     return _local_slope(t, theta, half_window)
 
 
-def find_gaps(t, factor: float = 3.0) -> np.ndarray:
+def find_gaps(t: Float[ArrayLike, " n"], factor: float = 3.0) -> Int[np.ndarray, " n_gaps"]:
     """Indices `k` where `t[k+1] - t[k]` exceeds `factor` times the median step (sample gaps),
     or does not advance (where stacked recordings meet)."""
     dt = np.diff(np.asarray(t, np.float64))
@@ -141,7 +152,7 @@ class Signals(eqx.Module):
             + "".join(f", {k}" for k in sorted(self.extras))
         )
 
-    def gaps(self, factor: float = 3.0) -> np.ndarray:
+    def gaps(self, factor: float = 3.0) -> Int[np.ndarray, " n_gaps"]:
         """Indices `k` after which the time stamps jump (see [`hdjax.find_gaps`][])."""
         if self.t is None:
             raise DataError("these signals carry no time stamps; build them with hdjax.signals")
@@ -194,6 +205,7 @@ def derive_signals(
     )
 
 
+@typing.no_type_check  # checks `joint` itself: the older call signals(rec, ratio) gets a reason
 def signals(
     recording: Recording, joint: Joint, *, velocity: str = "difference", half_window: int = 5
 ) -> Signals:

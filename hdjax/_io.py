@@ -280,12 +280,23 @@ def _read_csv_table(path: Path, encoding: str | None = None) -> tuple[list[str],
     rows = [r for r in rows if r and any(c.strip() for c in r)]
     if not rows:
         raise DataError(f"{path}: the file has a header but no data rows")
+    return header, parse_cells(path, header, rows, 2)
+
+
+def parse_cells(
+    path: Path, header: list[str], rows: list[list[str]], first_line: int, locate=None
+) -> np.ndarray:
+    """The float64 body of CSV `rows` (the first at line `first_line`), empty cells NaN.
+
+    A row of the wrong length or a non-numeric cell is refused with its line and column; with
+    `locate`, a cell holding a NUL byte raises `locate()` instead (the file is not text).
+    """
     body = np.empty((len(rows), len(header)), dtype=np.float64)
     for i, row in enumerate(rows):
         if len(row) != len(header):
             raise DataError(
-                f"{path}: line {i + 2} has {len(row)} cells but the header has {len(header)}; "
-                "columns of different lengths cannot form a recording"
+                f"{path}: line {first_line + i} has {len(row)} cells but the header has "
+                f"{len(header)}; columns of different lengths cannot form a recording"
             )
         try:
             body[i] = [float(c) if c.strip() != "" else math.nan for c in row]
@@ -294,11 +305,13 @@ def _read_csv_table(path: Path, encoding: str | None = None) -> tuple[list[str],
                 try:
                     float(cell)
                 except ValueError:
+                    if locate is not None and "\x00" in cell:
+                        raise locate() from None
                     raise DataError(
                         f"{path}: non-numeric cell {cell!r} in column {header[j]!r} at line "
-                        f"{i + 2}; every cell must be a number"
+                        f"{first_line + i}; every cell must be a number"
                     ) from None
-    return header, body
+    return body
 
 
 def schema_spec(columns: ColumnMap, name: str, available, source) -> ColumnSpec | None:

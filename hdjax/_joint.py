@@ -58,6 +58,10 @@ class Joint:
         for key in ("ratio", "rated_torque"):
             if key not in table:
                 raise ConfigError(f"{where}: missing required key {key!r} (a positive number)")
+        # the numbers first, as __post_init__ would, so a TOML string gets this message
+        for key in ("ratio", "rated_torque", "current_limit", "torque_constant"):
+            if table.get(key) is not None:
+                _check_positive(key, table[key])
         return cls(**dict(table))
 
     def to_dict(self) -> dict:

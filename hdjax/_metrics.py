@@ -6,6 +6,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._custom_types import ArrayLike, Bool, Float
 from ._errors import DataError
 
 
@@ -29,7 +30,12 @@ class ErrorMetrics(NamedTuple):
         return {k: (int(v) if k == "n" else float(v)) for k, v in self._asdict().items()}
 
 
-def error_metrics(estimate, reference, rated_torque: float, mask=None) -> ErrorMetrics:
+def error_metrics(
+    estimate: Float[ArrayLike, ...],
+    reference: Float[ArrayLike, ...],
+    rated_torque: float,
+    mask: Bool[ArrayLike, ...] | None = None,
+) -> ErrorMetrics:
     """RMS, maximum and percentage errors of `estimate` against `reference`.
 
     The error rate is given in % of the rated torque $\\tau_0$, as Song et al. Fig. 17.

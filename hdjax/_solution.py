@@ -74,7 +74,7 @@ class Solution(eqx.Module):
     @property
     def ok(self) -> bool:
         """Whether the fit succeeded."""
-        return self.result == RESULTS.successful
+        return bool(self.result == RESULTS.successful)
 
     @property
     def message(self) -> str:

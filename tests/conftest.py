@@ -1,4 +1,9 @@
-"""Test configuration: float64, strict dtype promotion, and shared paths."""
+"""Test configuration: float64, strict dtype and rank promotion, and shared paths.
+
+hdjax's jaxtyping annotations are checked by beartype in every test: pyproject's pytest
+`addopts` passes `--jaxtyping-packages=hdjax,beartype.beartype`, whose import hook is installed
+before this file runs, so nothing here may import hdjax at module level before it.
+"""
 
 import atexit
 import os
@@ -11,6 +16,8 @@ import pytest
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
+# no implicit broadcasting between arrays of different ranks: `x - mean[None, :]`, not `x - mean`
+jax.config.update("jax_numpy_rank_promotion", "raise")
 
 # The CLI keeps JAX's compilation cache in $XDG_CACHE_HOME/hdjax: never the real home's in
 # tests, and off unless a test turns it on (tests/test_cache.py does, in a subprocess).

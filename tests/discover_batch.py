@@ -28,19 +28,50 @@ def _run(params_b, gains, drives_b, stride):
 _run = jax.jit(_run.__wrapped__, static_argnums=(3,))
 
 
-def simulate_draws(params_list, scenarios, seeds, *, duration, output_period, skip=0.5):
+def swing_drive(params, *, amplitude: float, period: float, duration: float, dt: float = DT):
+    """A `slow`-like drive with its own swing: the link follows $\\pi/2 - A\\cos\\omega t$
+    (amplitude `amplitude` [rad], period `period` [s]) with weights at arm lengths that change
+    once per period (0.5, 0.75, 1.0 of the longest, loads up to 0.95 rated), so the gravity
+    load is a smooth function of the output angle times a slowly changing arm."""
+    rated = float(np.asarray(params.rated_torque))
+    n = int(round(duration / dt))
+    t = np.arange(n) * dt
+    w = 2.0 * np.pi / period
+    theta = np.pi / 2 - amplitude * np.cos(w * t)
+    omega = amplitude * w * np.sin(w * t)
+    alpha = amplitude * w * w * np.cos(w * t)
+    arms = np.array([0.5, 0.75, 1.0])
+    k = np.floor(t / period).astype(int)
+    blend = np.clip((t - k * period) / 1.0, 0.0, 1.0)
+    blend = blend * blend * (3.0 - 2.0 * blend)
+    now, prev = arms[k % 3], arms[(k - 1) % 3]
+    arm = np.where(k == 0, now, prev + (now - prev) * blend)
+    f = lambda x: jnp.asarray(x, jnp.float64)
+    return plant.Drive(f(theta), f(omega), f(alpha), f(-0.95 * rated * arm), f(np.zeros(n)))
+
+
+def simulate_draws(params_list, scenarios, seeds, *, duration, output_period, skip=0.5, swing=None):
     """One recording per (params, scenario, seed) triple, simulated as one batch.
 
     All parameter sets must share their structure (effects on, static fields). The controller
-    gains are the first set's (a bench keeps its tuning across joints of one type).
+    gains are the first set's (a bench keeps its tuning across joints of one type). `swing`
+    (optional `(amplitude, period)`, or a list of them, one per draw) replaces the named
+    scenarios by [`swing_drive`][].
     """
     stride = int(round(output_period / DT))
     n_steps = int(round(duration / DT))
     n_out = n_steps // stride
     drives = []
-    for p, name, seed in zip(params_list, scenarios, seeds):
+    if swing is not None and not isinstance(swing[0], (tuple, list)):
+        swing = [swing] * len(params_list)
+    for j, (p, name, seed) in enumerate(zip(params_list, scenarios, seeds)):
         key = jax.random.PRNGKey(seed)
-        d = plant.scenario_drive(name, p, duration=duration, dt=DT, key=jax.random.fold_in(key, 0))
+        if swing is None:
+            d = plant.scenario_drive(
+                name, p, duration=duration, dt=DT, key=jax.random.fold_in(key, 0)
+            )
+        else:
+            d = swing_drive(p, amplitude=swing[j][0], period=swing[j][1], duration=duration)
         drives.append(jax.tree.map(lambda x: x[: n_out * stride], d))
     stack = lambda xs: jax.tree.map(lambda *a: jnp.stack(a), *xs)
     gains = default_gains(params_list[0])

@@ -22,6 +22,7 @@ from hdjax.discover._folds import (
     fold_assignment,
     segment_starts,
 )
+from hdjax.discover._pipeline import PipelineData, cross_validate
 from hdjax.discover._select import block_grams, cv_gains, cv_gains_by_blocks, fold_basis
 from hdjax.effects import SEGMENT_START
 
@@ -141,3 +142,27 @@ def test_path_inversion_recovers_the_torque_of_a_sharp_hysteresis(loop_gain):
     naive_z = np.asarray(dahl_state(jnp.asarray(twist / k), scale, jnp.asarray(reset)))
     naive = (twist - c * naive_z) / k
     assert np.abs(naive - torque).max() > 100 * err + 0.1
+
+
+def test_a_cross_validation_that_scores_no_sample_is_unknown_not_zero():
+    # a one-way torque sweep split in two halves: each fold holds out torques outside the range
+    # its training part calibrates, so nothing is scored; a zero error would accept any step
+    n = 2000
+    torque = np.linspace(-200.0, 200.0, n)
+    model = ComplianceModel.paper(JOINT, poly_order=0, kinematic="none", per_segment=False)
+    zeros = jnp.zeros(n)
+    sig = Signals(
+        twist=jnp.asarray(torque / 6.7e4),
+        current=zeros,
+        theta_m=zeros,
+        theta_l=zeros,
+        omega_m=zeros,
+        omega_l=zeros,
+        extras={SEGMENT_START: jnp.asarray(np.r_[1.0, np.zeros(n - 1)])},
+    )
+    data = PipelineData(sig, torque, np.r_[True, np.zeros(n - 1, bool)])
+    halves = [np.arange(n // 2), np.arange(n // 2, n)]
+    cv = cross_validate(model, data, halves)
+    assert np.isnan(cv.torque_rms) and np.isnan(cv.twist_rms_arcsec)
+    inner = [np.arange(800, 1000), np.arange(1000, 1200)]
+    assert np.isfinite(cross_validate(model, data, inner).torque_rms)

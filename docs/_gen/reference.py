@@ -162,6 +162,7 @@ def _toml_value(value) -> str:
 
 def _describe_check(check) -> str:
     """What a schema check accepts, read from the check itself (its kind and its limits)."""
+    check = inspect.unwrap(check)  # under pytest, jaxtyping's import hook wraps every function
     name = getattr(check, "__qualname__", "")
     outer = name.split(".<locals>")[0].lstrip("_")
     free = {}

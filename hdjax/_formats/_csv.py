@@ -7,13 +7,19 @@ import contextlib
 import csv
 import io
 import itertools
-import math
 from pathlib import Path
 
 import numpy as np
 
 from .._errors import DataError
-from .._io import _read_csv_table, bad_byte_error, nul_byte_error, nul_position, text_codec
+from .._io import (
+    _read_csv_table,
+    bad_byte_error,
+    nul_byte_error,
+    nul_position,
+    parse_cells,
+    text_codec,
+)
 
 TEXT = True
 """The readers take the column map's `encoding` (see [`hdjax.ColumnMap`][])."""
@@ -98,32 +104,6 @@ def read_table(path, names=None, encoding: str | None = None) -> dict[str, np.nd
     return {name: body[:, header.index(name)] for name in keep}
 
 
-def _parse(
-    path: Path, header: list[str], rows: list[list[str]], first_line: int, locate
-) -> np.ndarray:
-    body = np.empty((len(rows), len(header)), dtype=np.float64)
-    for i, row in enumerate(rows):
-        if len(row) != len(header):
-            raise DataError(
-                f"{path}: line {first_line + i} has {len(row)} cells but the header has "
-                f"{len(header)}; columns of different lengths cannot form a recording"
-            )
-        try:
-            body[i] = [float(c) if c.strip() != "" else math.nan for c in row]
-        except ValueError:
-            for j, cell in enumerate(row):
-                try:
-                    float(cell)
-                except ValueError:
-                    if "\x00" in cell:  # not text: refused as the whole-file reader does
-                        raise locate() from None
-                    raise DataError(
-                        f"{path}: non-numeric cell {cell!r} in column {header[j]!r} at line "
-                        f"{first_line + i}; every cell must be a number"
-                    ) from None
-    return body
-
-
 def iter_tables(path, chunk: int, names=None, encoding: str | None = None):
     """Consecutive tables of at most `chunk` rows; memory is bounded by the chunk."""
     path = Path(path)
@@ -138,6 +118,6 @@ def iter_tables(path, chunk: int, names=None, encoding: str | None = None):
                 return
             n_lines = len(block)
             rows = [r for r in block if r and any(c.strip() for c in r)]
-            body = _parse(path, header, rows, line, locate)
+            body = parse_cells(path, header, rows, line, locate)
             line += n_lines
             yield {header[j]: np.ascontiguousarray(body[:, j]) for j in keep}

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from .._errors import ConfigError
 from .._formats import require
+from .._lazy import dask_distributed
 from ..fleet import drift_figure, load_manifest, run_task, write_table
 from ..report import ResultDir, markdown_table, read_marker
 
@@ -92,7 +93,8 @@ def _client(args, n_tasks: int):
     require("distributed", "fleet")
     import logging
 
-    from dask.distributed import Client, LocalCluster
+    distributed = dask_distributed()
+    Client, LocalCluster = distributed.Client, distributed.LocalCluster
 
     if args.scheduler:
         try:
@@ -224,7 +226,7 @@ def _collect(args, man, out, staging, rd, run_task, write_table, read_marker, ja
 
 def _run(client, todo, rows, rd, bar, cache_dir, run_task, write_table) -> int:
     """Submit every task, collect rows as they finish (each saved at once), redraw the bar."""
-    from dask.distributed import as_completed
+    as_completed = dask_distributed().as_completed
 
     futures = {}
     # longest first (by log size): a long task started last would leave the other workers

@@ -278,7 +278,7 @@ def _newton(model, t, seg, r, hs, g, terms):
     return jax.lax.fori_loop(0, NEWTON_STEPS, body, t)
 
 
-def estimate_torque(model: ComplianceModel, data) -> TorqueEstimate:
+def estimate_torque(model: ComplianceModel, data: Recording | Signals) -> TorqueEstimate:
     """Estimate the output torque from twist, current and angles (eqs. (26)-(27)).
 
     **Arguments:**
@@ -379,7 +379,13 @@ def torque_estimator(model: ComplianceModel):
 
 
 def estimate_torque_single(
-    model: ComplianceModel, twist, current, theta_m, theta_l, omega_m, omega_l
+    model: ComplianceModel,
+    twist: float,
+    current: float,
+    theta_m: float,
+    theta_l: float,
+    omega_m: float,
+    omega_l: float,
 ) -> SingleEstimate:
     """Estimate the torque of one sample (eqs. (26)-(27)) with low latency from Python.
 

@@ -252,6 +252,15 @@ def collinear_terms(r: np.ndarray, names: list[str], rtol: float = RANK_RTOL) ->
     return groups
 
 
+def check_sample_count(n: int, p: int) -> None:
+    """Refuse `n` samples for `p` coefficients when `n < p`, saying what to record instead."""
+    if n < p:
+        raise CalibrationError(
+            f"{n} samples cannot calibrate {p} coefficients; record at least {p} samples "
+            f"(better {10 * p}) or reduce the model (fewer segments, lower orders)"
+        )
+
+
 def calibrate_lstsq(model: ComplianceModel, data, *, throw: bool = True) -> Solution:
     """Calibrate by linear least squares (Song et al. eqs. (15)-(17)), column-scaled (see module).
 
@@ -280,11 +289,7 @@ def calibrate_lstsq(model: ComplianceModel, data, *, throw: bool = True) -> Solu
     # a column is zero over the data exactly when its sum of squares is
     active, counts, dropped = _select_active(model, np.diag(g) > 0, t_np)
     p = int(active.sum())
-    if n < p:
-        raise CalibrationError(
-            f"{n} samples cannot calibrate {p} coefficients; record at least {p} samples "
-            f"(better {10 * p}) or reduce the model (fewer segments, lower orders)"
-        )
+    check_sample_count(n, p)
     fast = _csne(design, b, g, atb, active)
     if fast is not None:
         coef, cond = fast

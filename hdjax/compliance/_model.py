@@ -21,7 +21,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, Float
+from .._custom_types import Array, ArrayLike, Float, Int
 from .._errors import ConfigError
 from .._joint import Joint
 from ..effects import AbstractTerm, Constant, CurrentPolynomial, Harmonics, PaperFourier
@@ -287,7 +287,7 @@ class ComplianceModel(eqx.Module):
 
     # -- columns -----------------------------------------------------------------------------
 
-    def hinge_basis(self, torque) -> Float[Array, "n n_seg"]:
+    def hinge_basis(self, torque: Float[ArrayLike, " n"]) -> Float[Array, "n n_seg"]:
         """$\\phi_j(T)$ of eq. (7): the part of the path from 0 to $T$ inside segment $j$."""
         cols = []
         for lo, hi in self.segment_bounds:
@@ -295,7 +295,7 @@ class ComplianceModel(eqx.Module):
             cols.append(jnp.clip(torque, lo, hi) - zero)
         return jnp.stack(cols, axis=1)
 
-    def segment_index(self, torque) -> Array:
+    def segment_index(self, torque: Float[ArrayLike, "*shape"]) -> Int[Array, "*shape"]:
         """Index of the segment each torque falls in (`[l_j, u_j)` as eq. (7))."""
         # the number of knots at or below the torque (searchsorted side="right"), elementwise
         torque = jnp.asarray(torque, jnp.float64)
@@ -321,13 +321,15 @@ class ComplianceModel(eqx.Module):
             return jnp.zeros((sig.n_samples, 0), jnp.float64)
         return jnp.concatenate([t.columns(sig) for t in self.base_terms], axis=1)
 
-    def effect_columns(self, sig: Signals, torque) -> Float[Array, "n n_effect"]:
+    def effect_columns(
+        self, sig: Signals, torque: Float[ArrayLike, " n"] | None
+    ) -> Float[Array, "n n_effect"]:
         """Columns of the effect groups, evaluated at `torque` where they depend on it."""
         if not self.effect_terms:
             return jnp.zeros((sig.n_samples, 0), jnp.float64)
         return jnp.concatenate([t.columns(sig, torque) for t in self.effect_terms], axis=1)
 
-    def design(self, sig: Signals, torque) -> Float[Array, "n p"]:
+    def design(self, sig: Signals, torque: Float[ArrayLike, " n"]) -> Float[Array, "n p"]:
         """The design matrix $A$ of eq. (15) at the given torque (eq. (10), row per sample)."""
         torque = jnp.asarray(torque, jnp.float64)
         parts = [self.hinge_basis(torque)]
@@ -343,7 +345,7 @@ class ComplianceModel(eqx.Module):
         parts.append(self.effect_columns(sig, torque))
         return jnp.concatenate(parts, axis=1)
 
-    def predict_twist(self, sig: Signals, torque) -> Float[Array, " n"]:
+    def predict_twist(self, sig: Signals, torque: Float[ArrayLike, " n"]) -> Float[Array, " n"]:
         """Forward model: the twist $\\Delta\\theta$ of eq. (10) at a given torque."""
         return self.design(sig, torque) @ self.coef
 

@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, Float
+from .._custom_types import Array, ArrayLike, Float
 from .._errors import CalibrationError, ConfigError, InversionError
 from .._solution import RESULTS, Solution
 from ._lstsq import (
@@ -44,7 +44,7 @@ class RLSState(eqx.Module):
 
 
 @jax.jit
-def rls_init(a0, b0) -> RLSState:
+def rls_init(a0: Float[ArrayLike, "m p"], b0: Float[ArrayLike, " m"]) -> RLSState:
     """Initial solution from a first batch, eq. (18): $x_0 = G_0^{-1} A_0^\\top b_0$.
 
     $G_0^{-1}$ is formed from the QR factor of $A_0$ ($P_0 = R^{-1} R^{-\\top}$).
@@ -55,7 +55,12 @@ def rls_init(a0, b0) -> RLSState:
     return RLSState(x=x0, p=rinv @ rinv.T)
 
 
-def rls_step(state: RLSState, a, b, forgetting: float = 1.0) -> RLSState:
+def rls_step(
+    state: RLSState,
+    a: Float[ArrayLike, "m p"],
+    b: Float[ArrayLike, " m"],
+    forgetting: Float[ArrayLike, ""] = 1.0,
+) -> RLSState:
     """One block update, eqs. (20)-(23) (eqs. (24)-(25) when `a` has one row).
 
     With $S = \\lambda I + A P A^\\top = L L^\\top$ (Cholesky) and $W = L^{-1} A P$, the SMW
@@ -80,7 +85,12 @@ def rls_step(state: RLSState, a, b, forgetting: float = 1.0) -> RLSState:
 
 
 @eqx.filter_jit
-def rls_scan(state: RLSState, a_blocks, b_blocks, forgetting: float = 1.0):
+def rls_scan(
+    state: RLSState,
+    a_blocks: Float[ArrayLike, "n_blocks m p"],
+    b_blocks: Float[ArrayLike, "n_blocks m"],
+    forgetting: float = 1.0,
+) -> tuple[RLSState, Float[Array, "n_blocks p"]]:
     """Apply `rls_step` over blocks (`a_blocks`: `(n_blocks, m, p)`) in a `lax.scan`."""
 
     def _step(carry, ab):
@@ -99,7 +109,14 @@ def _r_factor(a):
     return jnp.linalg.qr(a, mode="r")
 
 
-def rls_solve(a, b, *, block_size: int = 1, forgetting: float = 1.0, init_samples=None):
+def rls_solve(
+    a: Float[ArrayLike, "n p"],
+    b: Float[ArrayLike, " n"],
+    *,
+    block_size: int = 1,
+    forgetting: float = 1.0,
+    init_samples=None,
+) -> tuple[RLSState, Float[Array, "n_steps p"]]:
     """Recursive least squares over all rows of `a` (in order).
 
     The first `init_samples` rows initialise by eq. (18) (default: the shortest prefix of

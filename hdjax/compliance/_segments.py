@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._custom_types import ArrayLike, Float
 from ._model import ComplianceModel
 
 MIN_SEGMENT_SAMPLES = 30
@@ -12,7 +13,7 @@ MIN_SEGMENT_COVER = 0.25
 
 def merge_sparse_segments(
     model: ComplianceModel,
-    torque,
+    torque: Float[ArrayLike, " n"],
     *,
     min_samples: int = MIN_SEGMENT_SAMPLES,
     min_cover: float = MIN_SEGMENT_COVER,

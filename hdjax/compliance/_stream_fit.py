@@ -33,6 +33,7 @@ from ._lstsq import (
     CSNE_MAX_COND,
     _compact_index,
     calibration_solution,
+    check_sample_count,
     fitted_model,
     select_active_counts,
     solve_from_r,
@@ -322,11 +323,7 @@ def calibrate_stream(
         raise DataError(f"{stream.label}: the stream holds no samples")
     active, counts_t, dropped = select_active_counts(model, np.diag(g) > 0, counts)
     n_act = int(active.sum())
-    if n < n_act:
-        raise CalibrationError(
-            f"{n} samples cannot calibrate {n_act} coefficients; record at least {n_act} "
-            f"samples (better {10 * n_act}) or reduce the model (fewer segments, lower orders)"
-        )
+    check_sample_count(n, n_act)
     collinear: tuple = ()
     csne = scaled_cholesky(g, atb, active, CSNE_MAX_COND)
     # -- pass 2: refinement with the true residual, or the QR factor ------------------------

@@ -194,11 +194,13 @@ def load_model(path) -> SavedModel:
         comp = None if comp is None else ComplianceModel.from_dict(comp)
         net = payload["network"]
         net = None if net is None else _network_from_dict(net)
+        units, meta = payload["units"], payload["meta"]
+        for key, table in (("units", units), ("meta", meta)):
+            if not isinstance(table, dict):
+                raise TypeError(f"{key!r} must be a table, got {type(table).__name__}")
     except (KeyError, TypeError, ValueError) as err:
         raise DataError(f"{path}: corrupt model file ({type(err).__name__}: {err})") from None
-    return SavedModel(
-        joint=joint, compliance=comp, network=net, units=payload["units"], meta=payload["meta"]
-    )
+    return SavedModel(joint=joint, compliance=comp, network=net, units=units, meta=meta)
 
 
 def ratio_mismatch(ratio: float, recording: Recording, *, whose: str = "the joint's") -> str:

@@ -374,16 +374,27 @@ def joint_of(cfg: Mapping) -> Joint:
 def model_of(cfg: Mapping, joint: Joint, scale: float) -> ComplianceModel:
     """The uncalibrated [`hdjax.compliance.ComplianceModel`][] of a resolved config's `[model]`
     table (Song et al. 2019, eqs. (7)-(10)), with motor currents divided by `scale`."""
-    m = cfg["model"]
-    return ComplianceModel.paper(
-        joint,
-        n_segments=m["n_segments"],
-        poly_order=m["poly_order"],
-        current_scale=scale,
-        kinematic=m["kinematic"],
-        fourier_order=m["fourier_order"],
-        harmonic_orders_m=tuple(m["harmonic_orders_m"]),
-        harmonic_orders_l=tuple(m["harmonic_orders_l"]),
-        per_segment=m["per_segment"],
-        velocity=m["velocity"],
-    )
+    return paper_model(cfg["model"], joint, scale)
+
+
+_STRUCTURE_KEYS = (
+    "n_segments",
+    "poly_order",
+    "kinematic",
+    "fourier_order",
+    "harmonic_orders_m",
+    "harmonic_orders_l",
+    "per_segment",
+    "velocity",
+)
+
+
+def paper_model(table: Mapping, joint: Joint, scale: float) -> ComplianceModel:
+    """The paper's model structure (Song et al. 2019, eqs. (7)-(10)) from a validated `[model]`
+    table; keys it does not hold take `ComplianceModel.paper`'s defaults (a fleet manifest's
+    table holds fewer). Motor currents are divided by `scale`."""
+    kw = {k: table[k] for k in _STRUCTURE_KEYS if k in table}
+    for k in ("harmonic_orders_m", "harmonic_orders_l"):
+        if k in kw:
+            kw[k] = tuple(kw[k])
+    return ComplianceModel.paper(joint, current_scale=scale, **kw)

@@ -15,7 +15,18 @@ import sys
 import warnings
 from pathlib import Path
 
+import equinox as eqx
+
+from .. import __version__
 from .._errors import DataError, HdjaxError
+from .._io import load_recording, read_toml
+from .._joint import load_joint
+from ..config._preflight import check_read_memory
+from ..report import ResultDir
+from . import _loop  # `_loop.discover` looked up at call time, where a test stops the command
+from ._checks import check_inputs
+from ._config import load_discover_config
+from ._report import write_report
 
 HELP = "residual loop: find, trace and add missing effects, report the torque error before/after"
 
@@ -32,7 +43,7 @@ def command(args: argparse.Namespace, parser=None) -> int:
 
 def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
     if parser is None:
-        from ..cli._common import Parser
+        from ..cli._common import Parser  # hdjax.cli imports this module: a cycle
 
         parser = Parser(prog="hdjax discover")
     p = parser
@@ -99,8 +110,6 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
 
 def run(args: argparse.Namespace) -> int:
     """Carry out a parsed `discover` command; raises `HdjaxError` on bad input."""
-    from ..report import ResultDir
-
     out: Path = args.out
     if args.max_effects < 0:
         raise DataError(f"--max-effects must be >= 0, got {args.max_effects}")
@@ -114,8 +123,6 @@ def run(args: argparse.Namespace) -> int:
     inputs = [args.train, args.test, args.joint, args.config]
     if args.config is not None:
         inputs += _config_inputs(args.config)
-    from ..config._preflight import check_read_memory
-
     check_read_memory(inputs[:2] + inputs[4:], fix="give shorter --train and --test logs")
     with ResultDir(out, overwrite=args.overwrite, inputs=inputs, command="discover") as rd:
         return _run_into(rd, args)
@@ -123,37 +130,27 @@ def run(args: argparse.Namespace) -> int:
 
 def _config_inputs(path: Path) -> list[Path]:
     """The data files a discover config names (for the output rules)."""
-    from .._io import read_toml
-
     data = read_toml(path).get("data", {})
     names = [data.get(k) for k in ("path", "train", "test")] if isinstance(data, dict) else []
     return [path.parent / n for n in names if isinstance(n, str) and n]
 
 
 def _run_into(rd, args: argparse.Namespace) -> int:
-    import hdjax
-
-    from ._checks import check_inputs
-    from ._loop import DiscoverOptions, discover
-    from ._report import write_report
-
     cfg_notes, cfg = [], {}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if args.config is not None:
-            from ._config import load_discover_config
-
             train, test, joint, cfg, cfg_notes = load_discover_config(args.config)
         else:
-            joint = hdjax.load_joint(args.joint)
+            joint = load_joint(args.joint)
             # every log format, by suffix, through the loader the other commands use
-            train = hdjax.load_recording(args.train)
-            test = hdjax.load_recording(args.test)
+            train = load_recording(args.train)
+            test = load_recording(args.test)
             cfg_notes = ["reference: the 'torque' column of the --train and --test files"]
     say = (lambda s: None) if args.quiet else (lambda s: print(f"[discover] {s}", file=sys.stderr))
     for w in caught:
         say(f"warning: {w.message}")
-    options = DiscoverOptions(
+    options = _loop.DiscoverOptions(
         max_effects=int(cfg.get("max_effects", args.max_effects)),
         min_gain=float(cfg.get("min_gain", args.min_gain)),
         n_segments=int(cfg.get("n_segments", 5)),
@@ -165,13 +162,11 @@ def _run_into(rd, args: argparse.Namespace) -> int:
         train, test, joint, min_order_m=options.library.orders_m[0], ignore_columns=ignore
     )
     if ignore:
-        import equinox as eqx
-
         drop = lambda r: eqx.tree_at(
             lambda x: x.extras, r, {k: v for k, v in r.extras.items() if k not in ignore}
         )
         train, test = drop(train), drop(test)
-    result = discover(train, test, joint, options, progress=say)
+    result = _loop.discover(train, test, joint, options, progress=say)
     result.aux.notes[:0] = cfg_notes + notes + [f"input warning: {w.message}" for w in caught]
     say("writing report" + ("" if args.no_figures else " and figures"))
     write_report(
@@ -184,7 +179,7 @@ def _run_into(rd, args: argparse.Namespace) -> int:
             "test": test.source,
             "joint": joint.to_dict(),
             "config": None if args.config is None else str(args.config),
-            "version": hdjax.__version__,
+            "version": __version__,
         },
     )
     say(
@@ -200,7 +195,7 @@ def cli_main(argv: list[str] | None = None) -> int:
     The same as `hdjax discover ...` (`hdjax.cli.main(["discover", ...])`), with the messages
     prefixed `hdjax discover: error:`.
     """
-    from ..cli._common import ParserExit, UsageError
+    from ..cli._common import ParserExit, UsageError  # hdjax.cli imports this module: a cycle
 
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     try:

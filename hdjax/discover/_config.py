@@ -29,6 +29,7 @@ import numpy as np
 from .._errors import ConfigError, check_keys, did_you_mean
 from .._io import ColumnMap, read_toml
 from .._joint import Joint
+from ..reference import load_referenced
 
 _DATA_KEYS = ("path", "train", "test", "test_blocks", "columns", "extras", "encoding", "reference")
 _DISCOVER_KEYS = (
@@ -66,8 +67,6 @@ def load_discover_config(path):
         )
     here = path.parent
     notes = []
-    from ..reference import load_referenced
-
     ref = data.get("reference")
     load = lambda p: load_referenced(p, colmap, ref, base_dir=here, where=f"{path} [data]")
     if "path" in data:

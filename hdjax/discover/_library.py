@@ -22,10 +22,11 @@ the built-in families give these keys (the report's `vocabulary`, [`hdjax.effect
 - `column:NAME*torque`: $(x - \\bar x)/s_x \\cdot T/\\tau_0$, a compliance that drifts with it.
 
 Harmonic orders come from the order spectrum of the residual (peaks, refined), merged with the
-integers and the combination orders $2 \\pm 2/N$; an order is offered only when the recording
-covers at least one full period of it. Nonlinear parameters (the smoothing speed
-$\\omega_s$, the Dahl scale, the backlash width) are scanned on a short grid; each grid member
-is a separate candidate of the same key, and the best one wins.
+integers and the combination orders $2 \\pm 2/N$; a spectrum peak is searched only where the
+recording covers a full period, a named order as soon as it covers a third of one.
+Nonlinear parameters (the smoothing speed $\\omega_s$, the Dahl scale, the backlash width) are
+scanned on a short grid; each grid member is a separate candidate of the same key, and the best
+one wins.
 """
 
 from __future__ import annotations
@@ -89,6 +90,10 @@ def candidate_columns(term, sig, torque) -> np.ndarray:
     return np.asarray(term.columns(sig, torque))
 
 
+MIN_PERIOD_FRACTION = 1.0 / 3.0
+"""The least share of a period that a named (grid) order's swing must cover to be offered."""
+
+
 def min_resolvable_order(theta) -> float:
     """The lowest order with at least one full period inside the angle's span."""
     span = float(np.ptp(np.asarray(theta)))
@@ -105,22 +110,29 @@ def spectrum_orders(
     existing: list[float],
     n_peaks: int,
 ) -> tuple[list[tuple[float, str]], OrderSpectrum | None]:
-    """Orders to try for one angle: spectrum peaks (refined) plus the named orders it resolves.
+    """Orders to try for one angle: spectrum peaks (refined) plus the named orders it covers.
 
-    Orders within half a resolution of one already in the model (`existing`) are left out.
-    Returns `[(order, origin)]` (origin `"spectrum"` or `"grid"`) and the spectrum (None when
-    the record resolves no order in the range).
+    Spectrum peaks are searched only among orders with a full period inside the angle's span
+    (below that the periodogram cannot place a peak). A named order (an integer, $2 \\pm 2/N$,
+    ...) is offered as soon as the span covers `MIN_PERIOD_FRACTION` (a third) of its period:
+    a once-per-revolution error over a ±90° swing is a smooth bump that cross-validation weighs
+    against the smooth terms (torque polynomial, Coulomb, the compliance of a gravity-like
+    load). Orders within half a resolution of one already in the model (`existing`) are left
+    out. Returns `[(order, origin)]` (origin `"spectrum"` or `"grid"`) and the spectrum (None
+    when the record resolves no order in the range).
     """
-    lowest = max(order_range[0], min_resolvable_order(theta))
-    if lowest >= order_range[1]:
-        return [], None
-    spec = order_spectrum(
-        theta, residual, signal=signal, min_order=lowest, max_order=order_range[1]
-    )
-    res = spec.resolution
-    named = [k for k in named if lowest <= k <= order_range[1]]
+    full = min_resolvable_order(theta)
+    lowest = max(order_range[0], full)
+    named = [k for k in named if max(order_range[0], MIN_PERIOD_FRACTION * full) <= k]
+    named = [k for k in named if k <= order_range[1]]
+    res = 2.0 * math.pi / max(float(np.ptp(np.asarray(theta))), 1e-12)
+    spec = None
+    if lowest < order_range[1]:
+        spec = order_spectrum(
+            theta, residual, signal=signal, min_order=lowest, max_order=order_range[1]
+        )
     orders: list[tuple[float, str]] = []
-    for k, _ in spectrum_peaks(spec, n_peaks=n_peaks):
+    for k, _ in spectrum_peaks(spec, n_peaks=n_peaks) if spec is not None else []:
         k = refine_peak(theta, residual, k, res)
         # A peak within half a resolution of a named order (an integer, 2 - 2/N, ...) cannot be
         # told apart from it by this record: report the named order unless it fits clearly worse.

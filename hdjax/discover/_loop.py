@@ -33,6 +33,7 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from .._errors import CalibrationError, DataError, HdjaxError, InversionError
 from .._joint import Joint
@@ -47,6 +48,7 @@ from ._folds import (
     cv_block_length,
     fold_assignment,
 )
+from ._gram import block_statistics, fold_gains
 from ._library import LibraryOptions, build_library, candidate_columns
 from ._pipeline import (
     PipelineData,
@@ -66,6 +68,7 @@ from ._select import (
     sindy_select,
 )
 from ._spectrum import OrderSpectrum, order_spectrum
+from ._timing import Phases, null_phases
 from ._uncertainty import bootstrap_length, effect_intervals
 from ._unexplained import unexplained_structure
 
@@ -257,6 +260,14 @@ def training_data(model: ComplianceModel, train, estimate_=None):
     return data.pair(driver)
 
 
+def _fold_of_block(blocks: np.ndarray, folds) -> np.ndarray:
+    """The fold of each block, for held-out sets made of whole blocks."""
+    out = np.zeros(int(blocks.max()) + 1, int)
+    for f, te in enumerate(folds):
+        out[blocks[te]] = f
+    return out
+
+
 def score_candidates(
     model,
     train,
@@ -267,52 +278,71 @@ def score_candidates(
     blocks=None,
     resamples=(),
     est=None,
+    phases=None,
 ):
     """Library, spectra and per-candidate scores for one step.
+
+    With `blocks` (the folds' whole contiguous blocks), every cross-validated score comes from
+    one pass of per-block Gram statistics ([`hdjax.discover._gram`][]); without, from per-fold
+    QR factors ([`hdjax.discover._select.cv_gains`][]).
 
     **Returns:** `(scored, spectra, resid)`, `scored` a list of `(candidate, gain, fold gains,
     sindy-selected, gains over the resampled fold assignments)`.
     """
+    phase = phases or null_phases()
     data = _as_data(model, train)
-    sig, torque = training_data(model, data, est)
-    a_full = design(model, sig, torque)
-    active = np.asarray(model.active)
-    a = a_full[:, active]
-    y = np.asarray(sig.twist)
-    resid = y - a_full @ np.asarray(model.coef)
-    cands, spectra = build_library(
-        sig,
-        torque,
-        resid,
-        ratio=model.ratio,
-        rated_torque=model.rated_torque,
-        existing_keys=model.effect_keys,
-        existing_terms=model.effect_terms,
-        options=options.library,
-        extra_columns=extra_columns,
-        twist_sign=model.twist_sign,
-    )
-    if not cands:
-        return [], spectra, resid
-    cols = [candidate_columns(c.term, sig, torque) for c in cands]
-    basis = fold_basis(a, y, options.n_folds, options.block, tests=folds)
-    flat_cols, owner = [], []
-    for i, c in enumerate(cols):
-        for j in range(c.shape[1]):
-            flat_cols.append(c[:, j])
-            owner.append(i)
-    selected = sindy_select(
-        a, resid, flat_cols, [str(o) for o in owner], threshold=options.sindy_threshold
-    )
-    owner = np.asarray(owner)
-    usable = [i for i, c in enumerate(cols) if np.isfinite(c).all() and np.ptp(c, axis=0).max() > 0]
-    groups = [cols[i] for i in usable]
-    gains = cv_gains(basis, groups)
-    if len(resamples):
-        stats = block_grams(a, groups, y, blocks)
-        resampled = [cv_gains_by_blocks(stats, fb, options.n_folds) for fb in resamples]
-    else:
-        resampled = []
+    with phase("design"):
+        sig, torque = training_data(model, data, est)
+        a_full = design(model, sig, torque)
+        active = np.asarray(model.active)
+        a = a_full[:, active]
+        y = np.asarray(sig.twist)
+        resid = y - a_full @ np.asarray(model.coef)
+        del a_full
+    with phase("library"):
+        cands, spectra = build_library(
+            sig,
+            torque,
+            resid,
+            ratio=model.ratio,
+            rated_torque=model.rated_torque,
+            existing_keys=model.effect_keys,
+            existing_terms=model.effect_terms,
+            options=options.library,
+            extra_columns=extra_columns,
+            twist_sign=model.twist_sign,
+        )
+        if not cands:
+            return [], spectra, resid
+        cols = [candidate_columns(c.term, sig, torque) for c in cands]
+    with phase("sindy"):
+        flat_cols, owner = [], []
+        for i, c in enumerate(cols):
+            for j in range(c.shape[1]):
+                flat_cols.append(c[:, j])
+                owner.append(i)
+        selected = sindy_select(
+            a, resid, flat_cols, [str(o) for o in owner], threshold=options.sindy_threshold
+        )
+        owner = np.asarray(owner)
+    with phase("twist CV"):
+        usable = [
+            i for i, c in enumerate(cols) if np.isfinite(c).all() and np.ptp(c, axis=0).max() > 0
+        ]
+        groups = [cols[i] for i in usable]
+        if blocks is not None and folds is not None:
+            stats = block_statistics(a, groups, y, blocks)
+            total, per_fold = fold_gains(stats, _fold_of_block(blocks, folds), options.n_folds)
+            gains = list(zip(total.tolist(), per_fold))
+            resampled = [fold_gains(stats, fb, options.n_folds)[0] for fb in resamples]
+        else:
+            basis = fold_basis(a, y, options.n_folds, options.block, tests=folds)
+            gains = cv_gains(basis, groups)
+            if len(resamples):
+                stats = block_grams(a, groups, y, blocks)
+                resampled = [cv_gains_by_blocks(stats, fb, options.n_folds) for fb in resamples]
+            else:
+                resampled = []
     scored = [
         (
             cands[i],
@@ -361,28 +391,41 @@ def discover(
     `final_test_rms` [N·m], `baseline_cv_torque_rms` and `final_cv_torque_rms` [N·m] (on
     TRAIN), `cv_block_samples` and `fit_time_s`; `aux` the loop's
     [`hdjax.discover.DiscoveryRecord`][] (baseline, steps, spectra, ranking, notes).
+
+    The loop's linear algebra is many small dense solves between JAX programs; it runs with
+    one BLAS thread (`threadpoolctl`), which on a small shared machine is several times faster
+    than BLAS threads contending with XLA's and with each other (the results are the same).
     """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _discover(train, test, joint, options, progress)
+
+
+def _discover(train, test, joint, options, progress) -> Solution:
     say = progress or (lambda _: None)
     t_start = time.perf_counter()
     for rec, name in ((train, "TRAIN"), (test, "TEST")):
         if rec.torque is None:
             raise DataError(f"{name} ({rec.source}) has no 'torque' column; the loop needs it")
     notes: list[str] = []
-    model = baseline_model = calibrate_baseline(train, joint, options, notes)
-    data = _as_data(model, train)
-    test_data = _as_data(model, test)
+    phase = Phases()
+    with phase("baseline"):
+        model = baseline_model = calibrate_baseline(train, joint, options, notes)
+        data = _as_data(model, train)
+        test_data = _as_data(model, test)
     n_gaps = int(data.starts.sum()) - 1
     if n_gaps:
         notes.append(
             f"TRAIN has {n_gaps} gap(s) (time steps over 3 sample periods): {n_gaps + 1} "
             "segments; memory states restart and derivatives stop at each gap"
         )
-    base_metrics, base_est = _test_errors(model, test_data, joint.rated_torque)
-    base_twist = _twist_rms(model, test_data)
+    with phase("test"):
+        base_metrics, base_est = _test_errors(model, test_data, joint.rated_torque)
+        base_twist = _twist_rms(model, test_data)
     say(f"baseline: test torque RMS {base_metrics.rms:.4g} N·m, max {base_metrics.max:.4g} N·m")
     # folds: whole contiguous blocks, no shorter than the residual's correlation length
-    est_train = estimate(model, data)
-    resid0 = data.twist - design(model, *data.pair()) @ np.asarray(model.coef)
+    with phase("baseline"):
+        est_train = estimate(model, data)
+        resid0 = data.twist - design(model, *data.pair()) @ np.asarray(model.coef)
     block, note = cv_block_length(resid0, data.starts, options.n_folds, options.block)
     if note:
         notes.append(note)
@@ -394,9 +437,15 @@ def discover(
     resamples = [
         rng.permutation(np.arange(n_blocks) % options.n_folds) for _ in range(options.n_resamples)
     ]
-    cv = cross_validate(model, data, folds)
+    with phase("torque CV"):
+        cv = cross_validate(model, data, folds)
     base_cv = cv
     say(f"baseline: cross-validated torque RMS {cv.torque_rms:.4g} N·m on TRAIN")
+    if not np.isfinite(cv.torque_rms):
+        notes.append(
+            "cross-validation scores no held-out sample: every fold holds out torques outside "
+            "the range its training part calibrates, so no effect can be judged and none is added"
+        )
     extra_columns = _usable_columns(train)
     steps: list[DiscoveryStep] = []
     excluded: set[str] = set()
@@ -413,6 +462,7 @@ def discover(
             blocks=blocks,
             resamples=resamples,
             est=est_train,
+            phases=phase,
         )
         ranked = _best_per_key([s for s in scored if s[0].key not in excluded], options.min_gain)
         ranking = [
@@ -440,10 +490,12 @@ def discover(
                 if gain < options.min_gain:
                     break
                 try:
-                    new_model, new_est = calibrate(
-                        model.with_effects(cand.term), data, notes, est_train
-                    )
-                    new_cv = cross_validate(new_model, data, folds, cv)
+                    with phase("calibrate"):
+                        new_model, new_est = calibrate(
+                            model.with_effects(cand.term), data, notes, est_train
+                        )
+                    with phase("torque CV"):
+                        new_cv = cross_validate(new_model, data, folds, cv)
                 except (CalibrationError, InversionError) as err:
                     notes.append(f"candidate {cand.key} could not be added: {err}")
                     continue
@@ -478,7 +530,9 @@ def discover(
             )
             break
         _, cand, gain, folds_, stab, new_model, new_est, new_cv = best
-        metrics, est = _test_errors(new_model, test_data, joint.rated_torque)
+        with phase("test"):
+            metrics, est = _test_errors(new_model, test_data, joint.rated_torque)
+            twist_rms = _twist_rms(new_model, test_data)
         model, est_train, cv = new_model, new_est, new_cv
         steps.append(
             DiscoveryStep(
@@ -488,7 +542,7 @@ def discover(
                 cv_gain=gain,
                 fold_gains=[float(x) for x in folds_],
                 test=metrics,
-                twist_rms_arcsec=_twist_rms(model, test_data),
+                twist_rms_arcsec=twist_rms,
                 ranking=ranking,
                 spectra=spectra,
                 model=model,
@@ -505,25 +559,29 @@ def discover(
         )
     # amplitudes with intervals, and what is left
     intervals = []
-    if steps:
-        sig_d, torque = data.pair(est_train)
-        a_final = design(model, sig_d, torque)
-        res_final = data.twist - a_final @ np.asarray(model.coef)
-        length = bootstrap_length(block, res_final, data.starts)
-        intervals = effect_intervals(model, a_final, data, est_train, length=length)
-        for s_, iv in zip(steps, intervals):
-            s_.amplitude = iv
-    corr = correlation_length(resid, data.starts) if resid is not None else 1
-    left = unexplained_structure(
-        resid if resid is not None else data.twist * 0.0,
-        spectra,
-        {
-            "torque": data.torque,
-            "omega_m": np.asarray(data.sig.omega_m),
-            "omega_l": np.asarray(data.sig.omega_l),
-        },
-        correlation_length=corr,
-    )
+    with phase("intervals"):
+        if steps:
+            sig_d, torque = data.pair(est_train)
+            a_final = design(model, sig_d, torque)
+            res_final = data.twist - a_final @ np.asarray(model.coef)
+            length = bootstrap_length(block, res_final, data.starts)
+            intervals = effect_intervals(model, a_final, data, est_train, length=length)
+            del a_final
+            for s_, iv in zip(steps, intervals):
+                s_.amplitude = iv
+    with phase("unexplained"):
+        corr = correlation_length(resid, data.starts) if resid is not None else 1
+        left = unexplained_structure(
+            resid if resid is not None else data.twist * 0.0,
+            spectra,
+            {
+                "torque": data.torque,
+                "omega_m": np.asarray(data.sig.omega_m),
+                "omega_l": np.asarray(data.sig.omega_l),
+            },
+            correlation_length=corr,
+        )
+    say(phase.line())
     final = steps[-1].test if steps else base_metrics
     if final.rms > base_metrics.rms:
         # TEST never chooses, so it can disagree with cross-validation: say so, loudly

@@ -11,8 +11,10 @@ from pathlib import Path
 import numpy as np
 
 from .. import effects
+from .._features import find_gaps
 from .._plotting import pyplot
 from .._solution import Solution
+from ..compliance._lstsq import prepare
 from ._loop import ARCSEC, DiscoveryRecord, residual_spectra
 
 STOPPING_RULE = (
@@ -98,8 +100,6 @@ def _plot_spectra(spectra, chosen, title, path):
 def _plot_residual_vs_angle(model, data, title, path):
     plt = pyplot()
 
-    from ..compliance._lstsq import prepare
-
     sig, torque = prepare(model, data)
     r = (np.asarray(sig.twist) - np.asarray(model.predict_twist(sig, torque))) * ARCSEC
     idx = np.linspace(0, r.size - 1, min(r.size, 6000)).astype(int)
@@ -117,8 +117,6 @@ def _plot_residual_vs_angle(model, data, title, path):
 
 def _plot_torque(result: DiscoveryRecord, path):
     plt = pyplot()
-
-    from .._features import find_gaps
 
     test = result.test
     final = result.steps[-1].torque_estimate if result.steps else result.baseline_estimate

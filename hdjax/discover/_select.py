@@ -17,7 +17,7 @@ import dataclasses
 import numpy as np
 import scipy.linalg
 
-from .._errors import HdjaxError
+from .._lazy import pysindy
 
 MAX_SINDY_ROWS = 20000
 
@@ -143,10 +143,7 @@ def sindy_select(
     STLSQ keeps the terms whose coefficient exceeds `threshold` (a fraction of the residual's
     RMS per unit-RMS column). **Returns:** a boolean per column.
     """
-    try:
-        import pysindy as ps
-    except ImportError as err:  # pragma: no cover - pysindy is a dependency
-        raise HdjaxError("pysindy is required for the residual loop: pip install pysindy") from err
+    ps = pysindy()
     # The selection needs no more than a few ten thousand rows: take evenly spaced samples.
     step = max(1, a.shape[0] // MAX_SINDY_ROWS)
     a, residual = a[::step], residual[::step]

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..compliance import ComplianceModel
+from ._folds import correlation_length
 from ._pipeline import PipelineData
 
 ARCSEC = 180.0 * 3600.0 / np.pi
@@ -34,8 +35,6 @@ LEVEL = 0.95
 def bootstrap_length(cv_block: int, residual, starts) -> int:
     """Bootstrap block length: the cross-validation block, and at least twice the residual's
     correlation length."""
-    from ._folds import correlation_length
-
     return int(max(cv_block, 2 * correlation_length(residual, starts)))
 
 

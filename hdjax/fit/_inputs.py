@@ -27,6 +27,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._custom_types import Array, Float
 from .._errors import ConfigError
 from .._features import signals, smoothed_velocity
 from .._joint import Joint
@@ -102,8 +103,12 @@ def _check_positive(name, values) -> tuple[float, ...]:
 
 
 def dynamic_columns(
-    recording: Recording, joint: Joint, *, twist_rate: bool, hysteresis: tuple[float, ...]
-) -> dict[str, jax.Array]:
+    recording: Recording,
+    joint: Joint,
+    *,
+    twist_rate: bool,
+    hysteresis,  # validated below (a tuple of positive scales), with a readable error
+) -> dict[str, Float[Array, " n"]]:
     r"""The dynamic network inputs (see the module docstring), name -> `(n,)` column.
 
     `twist_rate`: $\dot{\Delta\theta}$ of eq. (5) [rad/s]; `hysteresis`: twist scales [rad] of
@@ -128,7 +133,7 @@ def hybrid_inputs(
     periodic: bool = True,
     kalman: bool = False,
     twist_rate: bool = False,
-    hysteresis: tuple[float, ...] = (),
+    hysteresis=(),  # validated below (a tuple of positive scales), with a readable error
 ) -> HybridInputs:
     """Precompute the inputs of a [`hdjax.fit.HybridModel`][] from a recording.
 

@@ -19,7 +19,6 @@ from .._io import ColumnMap, load_recording
 from .._joint import Joint
 from .._metrics import error_metrics
 from ..compliance import (
-    ComplianceModel,
     RecordingStream,
     calibrate_lstsq,
     calibrate_stream,
@@ -28,6 +27,7 @@ from ..compliance import (
 )
 from ..compliance._stream_fit import peak_abs
 from ..config import check_compatible, load_model
+from ..config._schema import paper_model
 from ..discover import DiscoverOptions, discover
 
 ARCSEC = 648000.0 / np.pi
@@ -88,30 +88,19 @@ def _coefficients(model) -> dict:
     return {n: float(c) for n, c, a in zip(model.term_names, coef, model.active) if a}
 
 
-def _structure(spec, joint, scale):
-    m = spec["model_structure"]
-    return ComplianceModel.paper(
-        joint,
-        n_segments=m["n_segments"],
-        poly_order=m["poly_order"],
-        current_scale=scale,
-        kinematic=m["kinematic"],
-        fourier_order=m["fourier_order"],
-        per_segment=m["per_segment"],
-    )
-
-
 def _calibrate(spec) -> dict:
     joint, cmap = _joint_and_map(spec)
     chunk = spec["settings"]["chunk"]
     if chunk:
         stream = RecordingStream.from_files([spec["log"]], cmap, chunk=chunk)
         scale = peak_abs(stream) or 1.0
-        res = calibrate_stream(_structure(spec, joint, scale), stream, chunk=chunk)
+        res = calibrate_stream(
+            paper_model(spec["model_structure"], joint, scale), stream, chunk=chunk
+        )
     else:
         rec = load_recording(spec["log"], cmap)
         scale = float(np.max(np.abs(np.asarray(rec.current)))) or 1.0
-        res = calibrate_lstsq(_structure(spec, joint, scale), rec)
+        res = calibrate_lstsq(paper_model(spec["model_structure"], joint, scale), rec)
     return {
         "n_samples": res.stats["n_samples"],
         "coefficients": _coefficients(res.value),

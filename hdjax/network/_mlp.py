@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, Float, PRNGKeyArray
+from .._custom_types import Array, ArrayLike, Float, PRNGKeyArray
 from .._errors import ConfigError, DataError
 from ._features import FeatureLayout, Features
 
@@ -101,14 +101,16 @@ class Network(eqx.Module):
 
     def normalised(self, z: Float[Array, "... n_features"]) -> Float[Array, ...]:
         """Forward pass on standardised inputs, standardised output (eqs. (38)-(41))."""
+        lead = (None,) * (z.ndim - 1)  # the biases broadcast over the batch axes explicitly
         h = z
         for w, b in zip(self.weights[:-1], self.biases[:-1]):
-            h = jax.nn.sigmoid(h @ w + b)  # eqs. (38)-(39)
-        return (h @ self.weights[-1] + self.biases[-1])[..., 0]  # eq. (40), linear output
+            h = jax.nn.sigmoid(h @ w + b[lead])  # eqs. (38)-(39)
+        return (h @ self.weights[-1] + self.biases[-1][lead])[..., 0]  # eq. (40), linear output
 
-    def __call__(self, x: Float[Array, "... n_features"]) -> Float[Array, ...]:
+    def __call__(self, x: Float[ArrayLike, "... n_features"]) -> Float[Array, ...]:
         """Torque [N·m] for one input vector `(n_features,)` or a batch `(n, n_features)`."""
-        z = (x - self.x_mean) / self.x_scale
+        lead = (None,) * (x.ndim - 1)  # one mean and scale per feature, for every batch row
+        z = (x - self.x_mean[lead]) / self.x_scale[lead]
         return self.y_mean + self.y_scale * self.normalised(z)
 
     @property

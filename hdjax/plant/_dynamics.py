@@ -44,7 +44,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._custom_types import Array, Float
+from .._custom_types import Array, ArrayLike, Float
 from ..effects import WG_COMPLIANCE, in_slot
 from ._params import PlantParams
 
@@ -132,7 +132,9 @@ def _one(params, slot: str):
 # ---------------------------------------------------------------------------------------------
 
 
-def flexspline_deflection(params: PlantParams, torque, *, inv=None):
+def flexspline_deflection(
+    params: PlantParams, torque: Float[ArrayLike, "*batch"], *, inv=None
+) -> Float[Array, "*batch"]:
     r"""Flexspline deformation $\Delta\theta_f(T)$ [rad], Song et al. eq. (7).
 
     Five segments with knots $\pm\tau_0/3, \pm2\tau_0/3$, extended linearly beyond $\pm\tau_0$.
@@ -174,7 +176,9 @@ def _flexspline_slope(params: PlantParams, torque, inv):
     )
 
 
-def flexspline_inverse(params: PlantParams, deflection, *, scale=1.0, extra=0.0, inv=None):
+def flexspline_inverse(
+    params: PlantParams, deflection: Float[ArrayLike, "*batch"], *, scale=1.0, extra=0.0, inv=None
+) -> Float[Array, "*batch"]:
     r"""Inverse of eq. (7): torque [N·m] from flexspline deformation, Song et al. eq. (27).
 
     Exact for the piecewise flexspline. `scale` multiplies every compliance and `extra` adds a
@@ -239,7 +243,13 @@ def _thermal(params: PlantParams, temperature):
     return 1.0 + eff.alpha * dtemp, dtemp
 
 
-def compliance_deflection(params: PlantParams, torque, temperature, *, inv=None):
+def compliance_deflection(
+    params: PlantParams,
+    torque: Float[ArrayLike, "*batch"],
+    temperature: Float[ArrayLike, ...],
+    *,
+    inv=None,
+) -> Float[Array, "*batch"]:
     r"""Elastic part of the deflection, $G(T) = s\Delta\theta_f(T) + \Delta\theta_{wg}(T/N)/N
     + b(T)$.
 
@@ -269,7 +279,9 @@ def _compliance_slope(params: PlantParams, torque, temperature, inv):
     return g
 
 
-def kinematic_error(params: PlantParams, theta_m, theta_l):
+def kinematic_error(
+    params: PlantParams, theta_m: Float[ArrayLike, "*batch"], theta_l: Float[ArrayLike, "*batch"]
+) -> Float[Array, "*batch"]:
     r"""Kinematic error $\theta_{err}$ [rad] (Song et al. eq. (9)) from the *state* angles.
 
     Harmonics are of the recorded angles $-\theta_m$, $-\theta_l$ (see the module docstring).
@@ -364,12 +376,16 @@ def _friction(params, inv, slot, omega):
     return f
 
 
-def motor_friction(params: PlantParams, omega_m, *, inv=None):
+def motor_friction(
+    params: PlantParams, omega_m: Float[ArrayLike, "*batch"], *, inv=None
+) -> Float[Array, "*batch"]:
     """Motor-side friction $F_m(\\omega_m)$ [N·m] (Coulomb, viscous, Stribeck; each if on)."""
     return _friction(params, _inv(params, inv), "motor_friction", omega_m)
 
 
-def output_friction(params: PlantParams, omega_l, *, inv=None):
+def output_friction(
+    params: PlantParams, omega_l: Float[ArrayLike, "*batch"], *, inv=None
+) -> Float[Array, "*batch"]:
     """Output-bearing friction $F_l(\\omega_l)$ [N·m] (Coulomb, viscous, Stribeck; each if on)."""
     return _friction(params, _inv(params, inv), "output_friction", omega_l)
 

@@ -22,9 +22,9 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy.signal
 
 from .._errors import ConfigError, did_you_mean
+from .._lazy import scipy_signal
 from .._recording import Recording
 from ._controller import default_gains
 from ._effects import _concrete
@@ -93,8 +93,9 @@ def scenario_drive(name: str, params: PlantParams, *, duration: float, dt: float
         theta, omega, alpha = _hold(n)
         seed = int(jax.random.randint(key, (), 0, 2**31 - 1))
         white = np.random.default_rng(seed).standard_normal(n)
-        b, a = scipy.signal.butter(2, 1.5, fs=1.0 / dt)
-        push = scipy.signal.lfilter(b, a, white)
+        signal = scipy_signal()
+        b, a = signal.butter(2, 1.5, fs=1.0 / dt)
+        push = signal.lfilter(b, a, white)
         push = push - push[0]
         push = push * _smoothstep(t / 0.5)
         # scale the 99th percentile of |push| to the rated torque, then limit softly at 0.95

@@ -30,7 +30,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, Float
+from .._custom_types import Array, ArrayLike, Float
 from .._errors import ConfigError, check_keys, did_you_mean
 from .._io import read_toml
 
@@ -126,7 +126,7 @@ def dh_arm(
     return DHArm(f(0), f(1), f(2), f(3), jnp.asarray(tool), convention=convention, name=name)
 
 
-def forward_kinematics(arm: DHArm, q: Float[Array, " n_joints"]):
+def forward_kinematics(arm: DHArm, q: Float[ArrayLike, " n_joints"]):
     r"""Joint-axis frames and the tool pose of `arm` at joint angles `q`.
 
     **Returns:** `(axes, tool)`: `axes[i]` is the 4x4 base-frame pose of the frame whose $z$

@@ -21,7 +21,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from .._custom_types import Array, Float
+from .._custom_types import Array, ArrayLike, Float
 from .._errors import ConfigError
 from ._dh import DHArm, forward_kinematics
 
@@ -33,8 +33,18 @@ def _check_frame(frame: str) -> None:
         raise ConfigError(f"Jacobian frame must be one of {', '.join(FRAMES)}, got {frame!r}")
 
 
+def _angles(arm: DHArm, q) -> Float[Array, "n_samples n_joints"]:
+    """`q` as float64 of shape `(n_samples, n_joints)`, or a ConfigError saying what it is."""
+    q = jnp.asarray(q, jnp.float64)
+    if q.ndim != 2 or q.shape[1] != arm.n_joints:
+        raise ConfigError(
+            f"joint angles must have shape (n_samples, {arm.n_joints}), got {tuple(q.shape)}"
+        )
+    return q
+
+
 def geometric_jacobian(
-    arm: DHArm, q: Float[Array, " n_joints"], *, frame: str = "tool"
+    arm: DHArm, q: Float[ArrayLike, " n_joints"], *, frame: str = "tool"
 ) -> Float[Array, "6 n_joints"]:
     r"""The $6\times n$ geometric Jacobian of `arm` at `q` (module docstring), float64.
 
@@ -64,15 +74,11 @@ def _columns_base(arm, q, joint):
 
 
 def jacobian_columns(
-    arm: DHArm, q: Float[Array, "n_samples n_joints"], joint: int, *, frame: str = "tool"
+    arm: DHArm, q: Float[ArrayLike, ...], joint: int, *, frame: str = "tool"
 ) -> Float[Array, "n_samples 6"]:
     """Column `joint` (0-based) of the Jacobian at every sample of `q`, one jitted call."""
     _check_frame(frame)
-    q = jnp.asarray(q, jnp.float64)
-    if q.ndim != 2 or q.shape[1] != arm.n_joints:
-        raise ConfigError(
-            f"joint angles must have shape (n_samples, {arm.n_joints}), got {tuple(q.shape)}"
-        )
+    q = _angles(arm, q)
     if not 0 <= joint < arm.n_joints:
         raise ConfigError(f"joint index {joint} outside 0..{arm.n_joints - 1}")
     fn = _columns_tool if frame == "tool" else _columns_base
@@ -84,13 +90,9 @@ def _rotations(arm, q):
     return jax.vmap(lambda qk: forward_kinematics(arm, qk)[1][:3, :3])(q)
 
 
-def tool_rotations(arm: DHArm, q: Float[Array, "n_samples n_joints"]) -> Float[Array, "n 3 3"]:
+def tool_rotations(arm: DHArm, q: Float[ArrayLike, ...]) -> Float[Array, "n_samples 3 3"]:
     """The tool frame's base-frame orientation $R$ at every sample of `q`."""
-    q = jnp.asarray(q, jnp.float64)
-    if q.ndim != 2 or q.shape[1] != arm.n_joints:
-        raise ConfigError(
-            f"joint angles must have shape (n_samples, {arm.n_joints}), got {tuple(q.shape)}"
-        )
+    q = _angles(arm, q)
     return _rotations(arm, q)
 
 
@@ -105,13 +107,9 @@ def _all_base(arm, q):
 
 
 def jacobians(
-    arm: DHArm, q: Float[Array, "n_samples n_joints"], *, frame: str = "tool"
+    arm: DHArm, q: Float[ArrayLike, ...], *, frame: str = "tool"
 ) -> Float[Array, "n_samples 6 n_joints"]:
     """The whole Jacobian at every sample of `q`, one jitted call."""
     _check_frame(frame)
-    q = jnp.asarray(q, jnp.float64)
-    if q.ndim != 2 or q.shape[1] != arm.n_joints:
-        raise ConfigError(
-            f"joint angles must have shape (n_samples, {arm.n_joints}), got {tuple(q.shape)}"
-        )
+    q = _angles(arm, q)
     return (_all_tool if frame == "tool" else _all_base)(arm, q)

@@ -70,6 +70,16 @@ def _numbers(key: str, v, n: int) -> list[float]:
     return [float(x) for x in v]
 
 
+def _one_of(key: str, name: str, value, options) -> str:
+    """`value` if it is one of `options`, else a ConfigError with a "did you mean" hint."""
+    if value not in options:
+        raise ConfigError(
+            f"{key} {name} must be one of {', '.join(options)}, got {value!r}"
+            f"{did_you_mean(str(value), options)}"
+        )
+    return value
+
+
 def check_reference(key: str, v) -> dict:
     """Validate a `[data.reference]` table; returns it with defaults filled in.
 
@@ -77,12 +87,7 @@ def check_reference(key: str, v) -> dict:
     """
     if not isinstance(v, Mapping):
         raise ConfigError(f'{key} must be a table, e.g. {{ kind = "column" }}, got {v!r}')
-    kind = v.get("kind", "column")
-    if kind not in KINDS:
-        raise ConfigError(
-            f"{key} kind must be one of {', '.join(KINDS)}, got {kind!r}"
-            f"{did_you_mean(str(kind), KINDS)}"
-        )
+    kind = _one_of(key, "kind", v.get("kind", "column"), KINDS)
     if kind == "column":
         extra = sorted(set(v) - {"kind"})
         if extra:
@@ -158,12 +163,7 @@ def check_reference(key: str, v) -> dict:
         for k in ("velocities", "accelerations"):
             if k in v:
                 raise ConfigError(f'{key}: {k!r} is used only with model_torque = "rnea"')
-    offset = v.get("offset", "none")
-    if offset not in OFFSETS:
-        raise ConfigError(
-            f"{key} offset must be one of {', '.join(OFFSETS)}, got {offset!r}"
-            f"{did_you_mean(str(offset), OFFSETS)}"
-        )
+    offset = _one_of(key, "offset", v.get("offset", "none"), OFFSETS)
     if offset == "fit" and frame != "tool":
         raise ConfigError(
             f'{key}: offset = "fit" needs wrench_frame = "tool" (a sensor\'s offset is '

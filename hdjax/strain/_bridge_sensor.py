@@ -19,7 +19,7 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, ArrayLike, Float
+from .._custom_types import Array, ArrayLike, Float, Scalar
 from .._errors import ConfigError
 from ._gauges import (
     PSI0_PAPER,
@@ -78,12 +78,12 @@ class StrainGaugeSensor(AbstractTorqueSensor):
     """
 
     geometry: FlexsplineGeometry = FlexsplineGeometry()
-    gauge_factor: float = 2.1
-    supply: float = 3.0
-    amplifier_gain: float = 500.0
-    psi0: float = PSI0_PAPER
-    dalpha: float = 0.0
-    beta0: float = 0.0
+    gauge_factor: Scalar = 2.1
+    supply: Scalar = 3.0
+    amplifier_gain: Scalar = 500.0
+    psi0: Scalar = PSI0_PAPER
+    dalpha: Scalar = 0.0
+    beta0: Scalar = 0.0
     mounting: str = eqx.field(default="output", static=True)
     adc_bits: int | None = eqx.field(default=None, static=True)
     adc_range: float = eqx.field(default=10.0, static=True)

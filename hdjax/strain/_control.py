@@ -27,7 +27,7 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, ArrayLike, Float
+from .._custom_types import Array, ArrayLike, Float, Scalar
 from .._errors import ConfigError
 
 # Table I and Section IV of the paper.
@@ -88,14 +88,14 @@ class TorqueController(eqx.Module):
     Raises [`hdjax.ConfigError`][] for negative gains or non-positive physical constants.
     """
 
-    kp: float = KP_PAPER
-    kd: float = KD_PAPER
-    sample_period: float = SAMPLE_PERIOD_PAPER
-    ratio: float = TABLE_I["ratio"]
-    motor_inertia: float = TABLE_I["motor_inertia"]
-    stiffness: float = TABLE_I["stiffness"]
-    link_inertia: float = math.inf
-    motor_torque_limit: float | None = None
+    kp: Scalar = KP_PAPER
+    kd: Scalar = KD_PAPER
+    sample_period: Scalar = SAMPLE_PERIOD_PAPER
+    ratio: Scalar = TABLE_I["ratio"]
+    motor_inertia: Scalar = TABLE_I["motor_inertia"]
+    stiffness: Scalar = TABLE_I["stiffness"]
+    link_inertia: Scalar = math.inf
+    motor_torque_limit: Scalar | None = None
     delay_samples: int = eqx.field(default=0, static=True)
     accel_feedforward: bool = True
 
@@ -110,12 +110,12 @@ class TorqueController(eqx.Module):
             raise ConfigError(f"delay_samples must be 0 or 1, got {self.delay_samples!r}")
 
     @property
-    def torque_inertia(self) -> float:
+    def torque_inertia(self) -> Scalar:
         r"""$a = N^2 J_M / K$ [s²], the coefficient of $\ddot T_J$ in eq. (18)."""
         return self.ratio**2 * self.motor_inertia / self.stiffness
 
     @property
-    def static_gain(self) -> float:
+    def static_gain(self) -> Scalar:
         r"""$c = 1 + N^2 J_M / J_L$, the coefficient of $T_J$ in eq. (18) (1 when constrained)."""
         return 1.0 + self.ratio**2 * self.motor_inertia / self.link_inertia
 
@@ -184,7 +184,7 @@ def control_law(
     return tau_m
 
 
-def steady_state_error(controller: TorqueController, friction: float) -> float:
+def steady_state_error(controller: TorqueController, friction: Scalar) -> Scalar:
     r"""Steady-state torque error from Coulomb friction, eq. (20).
 
     $$E_T = \frac{N\tau_F}{N^2 J_M K^{-1} K_p + 1 + N^2 J_M J_L^{-1}}.$$

@@ -15,7 +15,7 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, ArrayLike, Float
+from .._custom_types import Array, ArrayLike, Float, Scalar
 from .._errors import ConfigError
 from ._bridge_sensor import AbstractTorqueSensor
 from ._control import TABLE_I
@@ -42,8 +42,8 @@ class DeformationSensor(AbstractTorqueSensor):
       ×4) and 19 bits at the output, i.e. output steps of 12 µrad = 0.105 N·m at $K$ = 8800.
     """
 
-    stiffness: float = TABLE_I["stiffness"]
-    ratio: float = TABLE_I["ratio"]
+    stiffness: Scalar = TABLE_I["stiffness"]
+    ratio: Scalar = TABLE_I["ratio"]
     motor_bits: int | None = eqx.field(default=14, static=True)
     load_bits: int | None = eqx.field(default=19, static=True)
 
@@ -57,7 +57,7 @@ class DeformationSensor(AbstractTorqueSensor):
             if v is not None and (not isinstance(v, int) or not 1 <= v <= 40):
                 raise ConfigError(f"DeformationSensor.{name} must be an int in 1..40, got {v!r}")
 
-    def torque_step(self) -> float:
+    def torque_step(self) -> Scalar:
         """Torque equivalent of one output-encoder count [N·m] (0 for an exact encoder)."""
         if self.load_bits is None:
             return 0.0

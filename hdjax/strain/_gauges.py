@@ -21,7 +21,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, ArrayLike, Float
+from .._custom_types import Array, ArrayLike, Float, Scalar
 from .._errors import ConfigError
 
 # Paper values (Section III-A/B).
@@ -59,10 +59,10 @@ class FlexsplineGeometry(eqx.Module):
     $r_1 \ge r_2$ (no diaphragm between the boss and the cup).
     """
 
-    thickness: float = 0.39e-3
-    r1: float = 15.8e-3
-    r2: float = 24.85e-3
-    shear_modulus: float = 8.3e10
+    thickness: Scalar = 0.39e-3
+    r1: Scalar = 15.8e-3
+    r2: Scalar = 24.85e-3
+    shear_modulus: Scalar = 8.3e10
 
     def __check_init__(self):
         _check_positive_number("FlexsplineGeometry.thickness", self.thickness)
@@ -124,7 +124,7 @@ def torsional_strain(geometry: FlexsplineGeometry, torque: ArrayLike) -> Float[A
 
 
 def resolved_torque_gain(
-    geometry: FlexsplineGeometry, gauge_factor: float = 2.1, supply: float = 3.0
+    geometry: FlexsplineGeometry, gauge_factor: Scalar = 2.1, supply: Scalar = 3.0
 ) -> Float[Array, ""]:
     r"""Resolved torque gain (voltage resolution) of the bridge, eq. (8).
 
@@ -160,7 +160,7 @@ class GaugeStrains(NamedTuple):
 def gauge_strains(
     eps_t: ArrayLike,
     beta: ArrayLike,
-    psi0: float = PSI0_PAPER,
+    psi0: Scalar = PSI0_PAPER,
     dalpha: ArrayLike = 0.0,
     common: ArrayLike = 0.0,
 ) -> GaugeStrains:
@@ -204,8 +204,8 @@ def gauge_strains(
 
 def bridge_output(
     strains: GaugeStrains,
-    gauge_factor: float = 2.1,
-    supply: float = 3.0,
+    gauge_factor: Scalar = 2.1,
+    supply: Scalar = 3.0,
     *,
     linear: bool = True,
 ) -> Float[Array, ...]:
@@ -235,7 +235,7 @@ class Ripple(NamedTuple):
     """$\\gamma$ [rad], eq. (11)."""
 
 
-def residual_ripple(dalpha: ArrayLike, psi0: float = PSI0_PAPER) -> Ripple:
+def residual_ripple(dalpha: ArrayLike, psi0: Scalar = PSI0_PAPER) -> Ripple:
     r"""Residual ripple left by a gauge misalignment $\Delta\alpha$, eqs. (10)-(12).
 
     $$\epsilon_1 + \epsilon_3 - \epsilon_2 - \epsilon_4 = 4\epsilon_t + \Psi\sin(2\beta+\gamma),
@@ -258,7 +258,7 @@ def residual_ripple(dalpha: ArrayLike, psi0: float = PSI0_PAPER) -> Ripple:
 
 
 def misalignment_error_index(
-    dalpha: ArrayLike, psi0: float = PSI0_PAPER, eps_rated: float = EPS_RATED_PAPER
+    dalpha: ArrayLike, psi0: Scalar = PSI0_PAPER, eps_rated: Scalar = EPS_RATED_PAPER
 ) -> Float[Array, ...]:
     r"""Sensing inaccuracy index $E_R$ from a gauge misalignment, eq. (13).
 

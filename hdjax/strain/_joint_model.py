@@ -19,7 +19,7 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, Float
+from .._custom_types import Array, Float, Scalar
 from .._errors import ConfigError
 from ._control import TABLE_I
 
@@ -38,13 +38,13 @@ class IdealJoint(eqx.Module):
     The state is $(q_M, \dot q_M, q_L, \dot q_L)$.
     """
 
-    ratio: float = TABLE_I["ratio"]
-    motor_inertia: float = TABLE_I["motor_inertia"]
-    stiffness: float = TABLE_I["stiffness"]
-    link_inertia: float = math.inf
-    coulomb: float = 0.0
-    smoothing: float = 0.05
-    viscous: float = 0.0
+    ratio: Scalar = TABLE_I["ratio"]
+    motor_inertia: Scalar = TABLE_I["motor_inertia"]
+    stiffness: Scalar = TABLE_I["stiffness"]
+    link_inertia: Scalar = math.inf
+    coulomb: Scalar = 0.0
+    smoothing: Scalar = 0.05
+    viscous: Scalar = 0.0
 
     def __check_init__(self):
         for name in ("ratio", "motor_inertia", "stiffness", "link_inertia", "smoothing"):
@@ -85,7 +85,7 @@ class IdealJoint(eqx.Module):
         k4 = self._rhs(state + dt * k3, tau_m)
         return state + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
-    def fastest_rate(self) -> float:
+    def fastest_rate(self) -> Scalar:
         """Largest eigenvalue magnitude of the linearised dynamics [1/s] (sets the RK4 step)."""
         wn = math.sqrt(
             self.stiffness / (self.ratio**2 * self.motor_inertia)

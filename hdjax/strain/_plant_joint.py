@@ -16,6 +16,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._custom_types import Scalar
 from .._errors import ConfigError
 from ..plant import PlantParams, flexspline_torque, rk4_step, zero_state
 
@@ -32,7 +33,7 @@ class PlantJoint(eqx.Module):
 
     params: object
     constrained: bool = eqx.field(default=True, static=True)
-    load_torque: float = 0.0
+    load_torque: Scalar = 0.0
 
     def __check_init__(self):
         if not isinstance(self.params, PlantParams):
@@ -54,11 +55,11 @@ class PlantJoint(eqx.Module):
             )
         return new
 
-    def stiffness(self) -> float:
+    def stiffness(self) -> Scalar:
         """Largest small-signal joint stiffness $1/\\min k_i$ [N·m/rad] of the flexspline."""
         return float(1.0 / np.min(np.asarray(self.params.compliance)))
 
-    def fastest_rate(self) -> float:
+    def fastest_rate(self) -> Scalar:
         r"""A bound on the fastest rate of the mechanics [1/s], for the RK4 step.
 
         The torsional mode $\sqrt{K/(N^2J_M) + K/J_L}$ with the stiffest segment, and the

@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, Float
+from .._custom_types import Array, Float, Scalar
 from .._errors import ConfigError, DivergenceError
 from ._bridge_sensor import AbstractTorqueSensor
 from ._control import TorqueController, control_law
@@ -37,7 +37,7 @@ class TorqueReference(NamedTuple):
     r"""$\ddot T_d$ [N·m/s²]."""
 
 
-def _times(duration: float, sample_period: float):
+def _times(duration: Scalar, sample_period: Scalar):
     if not (duration > 0 and sample_period > 0):
         raise ConfigError(
             f"duration and sample_period must be positive, got {duration!r}, {sample_period!r}"
@@ -49,7 +49,7 @@ def _times(duration: float, sample_period: float):
 
 
 def step_reference(
-    amplitude: float, duration: float, sample_period: float = 0.5e-3, t_step: float = 0.0
+    amplitude: Scalar, duration: Scalar, sample_period: Scalar = 0.5e-3, t_step: Scalar = 0.0
 ) -> TorqueReference:
     """A torque step of `amplitude` [N·m] at `t_step` (derivatives zero: the impulse is left
     out, as a sampled controller cannot apply it). Fig. 16."""
@@ -60,7 +60,7 @@ def step_reference(
 
 
 def sine_reference(
-    amplitude: float, frequency: float, duration: float, sample_period: float = 0.5e-3
+    amplitude: Scalar, frequency: Scalar, duration: Scalar, sample_period: Scalar = 0.5e-3
 ) -> TorqueReference:
     """$T_d = A\\sin(2\\pi f t)$ with exact derivatives (Fig. 17: 5 N·m, 20 Hz)."""
     t = _times(duration, sample_period)
@@ -74,7 +74,7 @@ def sine_reference(
 
 
 def triangle_reference(
-    amplitude: float, period: float, cycles: float, sample_period: float = 0.5e-3
+    amplitude: Scalar, period: Scalar, cycles: Scalar, sample_period: Scalar = 0.5e-3
 ) -> TorqueReference:
     """A slow triangle $0 \\to A \\to -A \\to 0$, repeated, for the static characteristic
     (Fig. 15). Derivatives are the exact slope and zero."""

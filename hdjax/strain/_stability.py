@@ -18,6 +18,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.linalg
 
+from .._custom_types import Scalar
 from .._errors import ConfigError
 from ._control import TorqueController
 
@@ -50,7 +51,7 @@ class LoopPoles(NamedTuple):
         return f"discrete closed-loop poles: {zs}"
 
 
-def _zoh(a: float, c: float, ts: float):
+def _zoh(a: Scalar, c: Scalar, ts: Scalar):
     # x = (T, Tdot); a Tddot + c T = u  ->  xdot = A x + B u
     amat = np.array([[0.0, 1.0], [-c / a, 0.0]])
     bmat = np.array([[0.0], [1.0 / a]])

@@ -64,8 +64,8 @@ def backprop_step(weights, biases, z, d, mu, eta):
 def _global_error(weights, biases, z, t):
     h = z
     for w, b in zip(weights[:-1], biases[:-1]):
-        h = jax.nn.sigmoid(h @ w + b)
-    y = (h @ weights[-1] + biases[-1])[:, 0]
+        h = jax.nn.sigmoid(h @ w + b[None, :])  # one bias per unit, for every sample
+    y = (h @ weights[-1] + biases[-1][None, :])[:, 0]
     return 0.5 * jnp.mean((t - y) ** 2)  # eq. (42)
 
 

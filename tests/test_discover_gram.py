@@ -1,0 +1,98 @@
+"""The residual loop's fast kernels against the exact computations they replace.
+
+Candidate scores from per-block Gram statistics (`hdjax.discover._gram`) against the per-fold
+QR of `cv_gains` (standard folds) and explicit refits (a resampled assignment); the per-fold
+torque-CV solve (corrected semi-normal equations) against `scipy.linalg.lstsq` on the copied
+rows. The designs are ill-conditioned on purpose (monomials up to order 6 and blocks of
+different scales), as the loop's are.
+"""
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from hdjax.discover._folds import contiguous_blocks, fold_assignment
+from hdjax.discover._gram import block_statistics, fold_gains
+from hdjax.discover._pipeline import FoldSolver, _fold_solve
+from hdjax.discover._select import cv_gains, fold_basis
+
+
+def _problem(seed, n=4000):
+    rng = np.random.default_rng(seed)
+    x = np.cumsum(rng.standard_normal(n)) / np.sqrt(n)
+    x = x / np.abs(x).max()
+    t = np.linspace(0.0, 40.0, n)
+    a = np.column_stack(
+        [x**k for k in range(7)] + [1e3 * np.sin(t), 1e-3 * np.cos(3 * t), np.clip(x, 0, None)]
+    )
+    groups = [
+        np.column_stack([np.sin(2 * t), np.cos(2 * t)]),
+        np.tanh(x / 0.05)[:, None],
+        rng.standard_normal((n, 1)),
+        (x**3 + 1e-3 * rng.standard_normal(n))[:, None],  # nearly in the base's span
+        np.column_stack([np.sin(5 * t) * x, np.cos(5 * t) * x, x**7]),
+    ]
+    y = a @ rng.standard_normal(a.shape[1]) + 0.3 * groups[0][:, 0] + 0.05 * groups[1][:, 0]
+    y += 0.02 * rng.standard_normal(n)
+    starts = np.zeros(n, bool)
+    starts[[0, n // 3]] = True  # two segments
+    blocks = contiguous_blocks(starts, 150)
+    return a, groups, y, blocks
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_gram_scores_equal_the_per_fold_qr_scores(seed):
+    a, groups, y, blocks = _problem(seed)
+    folds = fold_assignment(blocks, 5)
+    exact = cv_gains(fold_basis(a, y, tests=folds), groups)
+    n_blocks = int(blocks.max()) + 1
+    total, per_fold = fold_gains(
+        block_statistics(a, groups, y, blocks, chunk=700), np.arange(n_blocks) % 5, 5
+    )
+    np.testing.assert_allclose(total, [g for g, _ in exact], rtol=0, atol=1e-7)
+    np.testing.assert_allclose(per_fold, np.array([f for _, f in exact]), rtol=0, atol=1e-7)
+
+
+def test_gram_scores_of_a_resampled_assignment_equal_explicit_refits():
+    a, groups, y, blocks = _problem(11)
+    n_blocks = int(blocks.max()) + 1
+    fob = np.random.default_rng(3).permutation(np.arange(n_blocks) % 5)
+    total, per_fold = fold_gains(block_statistics(a, groups, y, blocks), fob, 5)
+    fold = fob[blocks]
+    for i, g in enumerate(groups):
+        sse0 = sse1 = 0.0
+        for f in range(5):
+            tr, te = fold != f, fold == f
+            full = np.column_stack([a, g])
+            b0 = scipy.linalg.lstsq(a[tr], y[tr])[0]
+            b1 = scipy.linalg.lstsq(full[tr], y[tr])[0]
+            e0, e1 = np.sum((y[te] - a[te] @ b0) ** 2), np.sum((y[te] - full[te] @ b1) ** 2)
+            assert per_fold[i, f] == pytest.approx(1 - e1 / e0, abs=1e-7)
+            sse0, sse1 = sse0 + e0, sse1 + e1
+        assert total[i] == pytest.approx(1 - sse1 / sse0, abs=1e-7)
+
+
+def test_scores_do_not_depend_on_the_chunk():
+    a, groups, y, blocks = _problem(2)
+    fob = np.arange(int(blocks.max()) + 1) % 5
+    one = fold_gains(block_statistics(a, groups, y, blocks, chunk=1), fob, 5)
+    whole = fold_gains(block_statistics(a, groups, y, blocks, chunk=10**9), fob, 5)
+    np.testing.assert_allclose(one[0], whole[0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(one[1], whole[1], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_fold_solver_equals_lstsq_on_the_training_rows(seed):
+    a, _, y, blocks = _problem(seed)
+    active = np.ones(a.shape[1], bool)
+    active[2] = False
+    a[: len(y) // 2, -1] = 0.0  # a column a fold may see only zeros of
+    solver = FoldSolver(a, y, active)
+    for te in fold_assignment(blocks, 5) + [np.arange(len(y) // 2, len(y))]:
+        tr = np.ones(len(y), bool)
+        tr[te] = False
+        ref = np.zeros(a.shape[1])
+        ref[active] = _fold_solve(a[tr][:, active], y[tr])
+        got = solver.solve(te)
+        assert got[~active].tolist() == [0.0] * int((~active).sum())
+        np.testing.assert_allclose(a @ got, a @ ref, rtol=0, atol=1e-7 * np.abs(y).max())
