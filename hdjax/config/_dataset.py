@@ -34,7 +34,7 @@ from .._recording import Recording, make_recording
 from ..compliance import paper_knots
 from ..reference import describe_column_reference, load_with_reference
 from ._schema import joint_of
-from ._streamed import build_streamed_dataset, streams
+from ._streamed import StreamedDataset, build_streamed_dataset, streams
 
 
 @dataclasses.dataclass
@@ -58,8 +58,9 @@ class Dataset:
         return sum(r.n_samples for r in self.train)
 
 
-def build_dataset(exp, progress=None) -> Dataset:
-    """The [`hdjax.config.Dataset`][] an experiment describes.
+def build_dataset(exp, progress=None) -> Dataset | StreamedDataset:
+    """The [`hdjax.config.Dataset`][] an experiment describes (a
+    [`hdjax.config.StreamedDataset`][] when `[fit] chunk` streams the files).
 
     **Arguments:**
 

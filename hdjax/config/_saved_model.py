@@ -203,7 +203,12 @@ def load_model(path) -> SavedModel:
     return SavedModel(joint=joint, compliance=comp, network=net, units=units, meta=meta)
 
 
-def ratio_mismatch(ratio: float, recording: Recording, *, whose: str = "the joint's") -> str:
+def ratio_mismatch(
+    ratio: float,
+    recording,  # a Recording, or any object with theta_m, theta_l and source (streams)
+    *,
+    whose: str = "the joint's",
+) -> str:
     """Why the recording's angles do not match the gear `ratio` (`""` when they do, or when the
     output moves too little to tell): the slope of $\theta_m$ against $\theta_l$ must be
     within 5 % of the ratio (Song et al. eq. (5) with a small twist)."""

@@ -19,7 +19,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, Float
+from .._custom_types import ArrayLike, Float
 from .._errors import ConfigError, DataError, ModelMismatchError
 from .._features import signals
 from .._joint import Joint
@@ -82,7 +82,7 @@ def make_layout(
 class Features(eqx.Module):
     """A design of network inputs: `x` of shape `(n, n_features)` and its `layout`."""
 
-    x: Float[Array, "n n_features"]
+    x: Float[ArrayLike, "n n_features"]  # NumPy where the Kalman features are built in chunks
     layout: FeatureLayout
 
 

@@ -28,6 +28,7 @@ from ..compliance import (
     estimate_torque,
 )
 from ..config._schema import model_of
+from ..config._streamed import PartStream
 from . import _streamed as S
 
 PAPER_MS_PER_100 = {"model": 9.232, "network": 25.442}
@@ -57,7 +58,7 @@ PAPER_ERRORS = {
 # The compliance model
 
 
-def current_scale(cfg: dict, train: list[Recording]) -> float:
+def current_scale(cfg: dict, train: list[Recording] | PartStream) -> float:
     """The `[model] current_scale`, with `"auto"` = the largest |current| in the training data."""
     value = cfg["model"]["current_scale"]
     if isinstance(train, RecordingStream):  # streamed parts know their peak from the build pass
@@ -85,7 +86,7 @@ def stacked_signals(model, recordings: list[Recording]):
     return Signals.concatenate(sigs), torque
 
 
-def calibrate(cfg: dict, model, train: list[Recording], warn=None):
+def calibrate(cfg: dict, model, train: list[Recording] | PartStream, warn=None):
     """Calibrate by the `[fit]` method; returns the calibration's [`hdjax.Solution`][].
 
     Warnings (terms the data cannot reach) go to `warn` (a callable) when given.
@@ -114,7 +115,7 @@ def calibrate(cfg: dict, model, train: list[Recording], warn=None):
     return result
 
 
-def estimate_model(model, recordings: dict[str, Recording]) -> dict:
+def estimate_model(model, recordings: dict[str, Recording | PartStream]) -> dict:
     """Torque estimates of a calibrated model on each recording (name -> TorqueEstimate, or a
     `StreamedEstimate` for a streamed part)."""
     return {
@@ -127,7 +128,9 @@ def estimate_model(model, recordings: dict[str, Recording]) -> dict:
     }
 
 
-def metrics_of(estimates: dict, recordings: dict[str, Recording], rated: float) -> dict:
+def metrics_of(
+    estimates: dict, recordings: dict[str, Recording | PartStream], rated: float
+) -> dict:
     """name -> error metrics dict (rms, max, bias, rms_pct, max_pct, n), over all samples."""
     out = {}
     for name, est in estimates.items():
@@ -158,7 +161,9 @@ def network_available() -> str:
     return ""
 
 
-def train_network(cfg: dict, joint: Joint, train: list[Recording], seed: int, val=None):
+def train_network(
+    cfg: dict, joint: Joint, train: list[Recording] | PartStream, seed: int, val=None
+):
     """Train the `[network]` on the training recordings; returns `(network, info dict)`.
 
     At most `max_train_samples` samples are used, spread evenly over all training recordings
@@ -226,7 +231,7 @@ def train_network(cfg: dict, joint: Joint, train: list[Recording], seed: int, va
     return res.value, info
 
 
-def estimate_network(net, joint: Joint, recordings: dict[str, Recording]) -> dict:
+def estimate_network(net, joint: Joint, recordings: dict[str, Recording | PartStream]) -> dict:
     """Torque estimates of a trained network on each recording (name -> array, or a
     `StreamedEstimate` for a streamed part)."""
     return {
