@@ -16,5 +16,5 @@ def test_quick_tour_runs():
         # behaviour, not a failure of the example
         warnings.simplefilter("ignore", UserWarning)
         exec(compile(code, "README.md quick tour", "exec"), namespace)
-    assert namespace["result"].final.rms <= namespace["result"].baseline.rms
+    assert namespace["record"].final.rms <= namespace["record"].baseline.rms
     assert namespace["est"].torque.shape == namespace["test"].torque.shape
