@@ -98,6 +98,17 @@ def sin(x):
     return sincos(x)[0]
 
 
+def harmonic_sum(orders, amplitudes, phases, angle):
+    r"""$\sum_j a_j \sin(K_j \theta + \varphi_j)$: Song et al. eq. (9).
+
+    A Python sum over the static number of harmonics, which keeps XLA from a reduction; zeros
+    shaped like `angle` when there are none. Shared by the kinematic error and the compliance
+    ripple.
+    """
+    terms = [amplitudes[j] * sin(orders[j] * angle + phases[j]) for j in range(orders.shape[0])]
+    return sum(terms[1:], terms[0]) if terms else jnp.zeros_like(angle)
+
+
 @jax.custom_jvp
 def cos(x):
     r"""$\cos x$ from elementwise operations only (vectorised by XLA on CPU); see the module."""

@@ -145,12 +145,7 @@ class KinematicHarmonics(AbstractPlantEffect):
         return {}
 
     def __call__(self, angle, inv=None):
-        # a Python sum over the (static) number of harmonics keeps XLA from a reduction
-        terms = [
-            self.amplitudes[j] * _trig.sin(self.orders[j] * angle + self.phases[j])
-            for j in range(self.orders.shape[0])
-        ]
-        return sum(terms[1:], terms[0]) if terms else jnp.zeros_like(angle)
+        return _trig.harmonic_sum(self.orders, self.amplitudes, self.phases, angle)
 
 
 def _build(name: str, p: dict) -> KinematicHarmonics:

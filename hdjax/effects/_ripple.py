@@ -114,11 +114,7 @@ class ComplianceRipple(AbstractPlantEffect):
         return {}
 
     def __call__(self, angle, inv=None):
-        terms = [
-            self.amplitudes[j] * _trig.sin(self.orders[j] * angle + self.phases[j])
-            for j in range(self.orders.shape[0])
-        ]
-        return sum(terms[1:], terms[0]) if terms else jnp.zeros_like(angle)
+        return _trig.harmonic_sum(self.orders, self.amplitudes, self.phases, angle)
 
     def max_change(self):
         """$\\sum_j |a_j|$, the largest relative change (the integrator's stiffness check)."""
