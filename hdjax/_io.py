@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._custom_types import PathLike
 from ._errors import ConfigError, DataError, check_keys, did_you_mean as did_you_mean
 from ._recording import SIGNAL_COLUMNS, Recording, make_recording
 
@@ -374,7 +375,9 @@ def _build(
     )
 
 
-def load_csv(path, columns: ColumnMap | None = None, *, check_units: bool = True) -> Recording:
+def load_csv(
+    path: PathLike, columns: ColumnMap | None = None, *, check_units: bool = True
+) -> Recording:
     """Load a [`hdjax.Recording`][] from a CSV file with a header row.
 
     Without `columns` the header must name `t, theta_m, theta_l, current` (and optionally
@@ -387,7 +390,9 @@ def load_csv(path, columns: ColumnMap | None = None, *, check_units: bool = True
     return _build(table, columns, str(path), check_units)
 
 
-def load_npz(path, columns: ColumnMap | None = None, *, check_units: bool = True) -> Recording:
+def load_npz(
+    path: PathLike, columns: ColumnMap | None = None, *, check_units: bool = True
+) -> Recording:
     """Load a [`hdjax.Recording`][] from a `.npz` archive holding one array per column."""
     path = Path(path)
     if not path.exists():
@@ -404,7 +409,9 @@ def load_npz(path, columns: ColumnMap | None = None, *, check_units: bool = True
     return _build(table, columns, str(path), check_units)
 
 
-def load_recording(path, columns: ColumnMap | None = None, *, check_units: bool = True):
+def load_recording(
+    path: PathLike, columns: ColumnMap | None = None, *, check_units: bool = True
+) -> Recording:
     """Load a recording chosen by the file's suffix: `.csv`, `.npz`, or a format of
     `hdjax._formats` (Parquet, HDF5 / MATLAB v7.3, MCAP)."""
     if Path(path).is_dir():
@@ -461,7 +468,7 @@ def atomic_write_bytes(path, data: bytes) -> None:
         raise
 
 
-def save_csv(recording: Recording, path) -> None:
+def save_csv(recording: Recording, path: PathLike) -> None:
     """Write a recording as CSV (all columns, full float64 precision), atomically."""
     cols = recording.to_numpy()
     names = list(cols)
@@ -473,7 +480,7 @@ def save_csv(recording: Recording, path) -> None:
     atomic_write_bytes(path, buf.getvalue().encode())
 
 
-def save_npz(recording: Recording, path) -> None:
+def save_npz(recording: Recording, path: PathLike) -> None:
     """Write a recording as `.npz`, atomically."""
     import io
 

@@ -11,6 +11,7 @@ import math
 import os
 from pathlib import Path
 
+from .._custom_types import PathLike
 from .._errors import ConfigError, HdjaxError, ModelMismatchError
 from ._saved_model import ratio_mismatch
 from ._schema import joint_of, model_of
@@ -128,7 +129,7 @@ def _stat(p: Path) -> int:
         return 0
 
 
-def preflight(cfg: dict, *, base_dir=None, where: str = "config") -> None:
+def preflight(cfg: dict, *, base_dir: PathLike | None = None, where: str = "config") -> None:
     """Check a resolved config before any work: its model can be built and its data fits in
     memory.
 

@@ -14,11 +14,14 @@ References: M. Zechmeister, M. Kürster, "The generalised Lomb-Scargle periodogr
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from .._custom_types import ArrayLike, Float, Int, Real
 
 MAX_SPECTRUM_SAMPLES = 10000
 
@@ -27,8 +30,8 @@ class OrderSpectrum(NamedTuple):
     """Explained-variance fraction of a residual against trial orders of one angle."""
 
     signal: str
-    orders: np.ndarray
-    power: np.ndarray
+    orders: Float[np.ndarray, " n_orders"]
+    power: Float[np.ndarray, " n_orders"]
     resolution: float
     """Order resolution $2\\pi / \\mathrm{span}(\\theta)$: peaks closer than this merge."""
 
@@ -49,7 +52,7 @@ def _ls_power(theta, r, orders):
     return jax.lax.map(one, orders, batch_size=64)
 
 
-def subsample(n: int, limit: int = MAX_SPECTRUM_SAMPLES) -> np.ndarray:
+def subsample(n: int, limit: int = MAX_SPECTRUM_SAMPLES) -> Int[np.ndarray, " m"]:
     """Evenly spaced indices, at most `limit` of them (the periodogram needs no more)."""
     if n <= limit:
         return np.arange(n)
@@ -57,8 +60,8 @@ def subsample(n: int, limit: int = MAX_SPECTRUM_SAMPLES) -> np.ndarray:
 
 
 def order_spectrum(
-    theta,
-    residual,
+    theta: Real[ArrayLike, " n"],
+    residual: Real[ArrayLike, " n"],
     *,
     signal: str = "theta_m",
     min_order: float = 0.5,
@@ -82,7 +85,11 @@ def order_spectrum(
     return OrderSpectrum(signal, orders, np.asarray(power), resolution)
 
 
-def order_power(theta, residual, orders) -> np.ndarray:
+def order_power(
+    theta: Real[ArrayLike, " n"],
+    residual: Real[ArrayLike, " n"],
+    orders: Real[ArrayLike, " n_orders"] | Sequence[float],
+) -> Float[np.ndarray, " n_orders"]:
     """Periodogram values at given orders."""
     idx = subsample(np.asarray(theta).size)
     th = jnp.asarray(np.asarray(theta, np.float64)[idx])
@@ -90,7 +97,9 @@ def order_power(theta, residual, orders) -> np.ndarray:
     return np.asarray(_ls_power(th, r, jnp.asarray(orders, jnp.float64)))
 
 
-def refine_peak(theta, residual, order: float, resolution: float) -> float:
+def refine_peak(
+    theta: Real[ArrayLike, " n"], residual: Real[ArrayLike, " n"], order: float, resolution: float
+) -> float:
     """Refine a periodogram peak by golden-section search within ±resolution/2."""
     theta = np.asarray(theta, np.float64)
     idx = subsample(theta.size)
@@ -116,7 +125,9 @@ def refine_peak(theta, residual, order: float, resolution: float) -> float:
     return 0.5 * (lo + hi)
 
 
-def spectrum_peaks(spec: OrderSpectrum, *, n_peaks: int = 3, min_power: float = 0.01):
+def spectrum_peaks(
+    spec: OrderSpectrum, *, n_peaks: int = 3, min_power: float = 0.01
+) -> list[tuple[float, float]]:
     """The strongest local maxima of a spectrum, at least one resolution apart."""
     if n_peaks <= 0:
         return []

@@ -73,7 +73,7 @@ class PlantParams(eqx.Module):
     inertia_l: Float[Array, ""]
     torque_constant: Float[Array, ""]
     current_time_constant: Float[Array, ""]
-    compliance: Float[Array, 5]
+    compliance: Float[Array, " 5"]
     damping: Float[Array, ""]
     corner: Float[Array, ""]
     effects: dict
