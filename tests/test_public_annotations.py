@@ -53,6 +53,8 @@ NON_ARRAY: dict[str, set[str]] = {
     "hdjax.strain._control.hashimoto_controller": {"overrides"},
     # the [data] reference table as the configuration gives it, checked with a ConfigError
     "hdjax.reference._spec.check_reference": {"v"},
+    # a PlantParams, refused otherwise in __check_init__ with a ConfigError that says so
+    "hdjax.strain._plant_joint.PlantJoint.__init__": {"params"},
 }
 
 # Modules another change owns at present (the effects refactor: the families, the plant's

@@ -75,8 +75,8 @@ class Network(eqx.Module):
         hidden: Sequence[int] = (20,),
         *,
         key: PRNGKeyArray,
-        x_mean: Real[ArrayLike, " n_features"] | None = None,
-        x_scale: Real[ArrayLike, " n_features"] | None = None,
+        x_mean: Real[ArrayLike, " n_features"] | Sequence[float] | None = None,
+        x_scale: Real[ArrayLike, " n_features"] | Sequence[float] | None = None,
         y_mean: Real[ArrayLike, ""] | None = None,
         y_scale: Real[ArrayLike, ""] | None = None,
     ) -> None:

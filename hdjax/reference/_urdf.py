@@ -133,9 +133,9 @@ class UrdfArm:
 
     def rnea(
         self,
-        q: Real[ArrayLike, "... n_q"],
-        v: Real[ArrayLike, "... n_v"],
-        a: Real[ArrayLike, "... n_v"],
+        q: Real[ArrayLike, "... n_q"] | Sequence[float],
+        v: Real[ArrayLike, "... n_v"] | Sequence[float],
+        a: Real[ArrayLike, "... n_v"] | Sequence[float],
     ) -> Float[np.ndarray, "n_samples n_v"]:
         r"""$\tau = M(q)\ddot q + C(q,\dot q)\dot q + g(q)$ at every row: shape (n, n_joints)."""
         pin = self._pin

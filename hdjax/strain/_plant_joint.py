@@ -31,7 +31,7 @@ class PlantJoint(eqx.Module):
     - `load_torque`: external torque on the link [N·m] (free link only).
     """
 
-    params: PlantParams
+    params: object  # a PlantParams, checked in __check_init__ with a ConfigError
     constrained: bool = eqx.field(default=True, static=True)
     load_torque: Scalar = 0.0
 
