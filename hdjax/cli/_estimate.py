@@ -15,7 +15,7 @@ from ..config._preflight import check_read_memory
 from ..config._saved_model import angle_ratio_mismatch
 from ..network import predict_torque as net_estimate
 from ..report import check_output_file
-from ._common import Progress, read_column_map
+from ._common import Progress, add_command, add_flag, add_quiet, read_column_map
 
 HELP = "estimate torque on a new recording with a saved model (CSV in, CSV out)"
 EXAMPLE = """\
@@ -29,7 +29,7 @@ a reference torque, torque_measured is added and the RMS / maximum error go to s
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("estimate", help=HELP, description=HELP, epilog=EXAMPLE)
+    p = add_command(sub, "estimate", HELP, EXAMPLE)
     p.add_argument(
         "--model",
         required=True,
@@ -53,19 +53,18 @@ def add_parser(sub) -> None:
         help="TOML file with the data's [joint] table; refused if its ratio differs from the "
         "model's",
     )
-    p.add_argument(
+    add_flag(
+        p,
         "--overwrite",
-        action="store_true",
-        help="replace an estimate written earlier by hdjax at --out (never an input or another "
-        "file)",
+        "replace an estimate written earlier by hdjax at --out (never an input or another file)",
     )
-    p.add_argument(
+    add_flag(
+        p,
         "--force",
-        action="store_true",
-        help="estimate even when the angles look wrong for the model (degrees instead of "
-        "radians, or a motor/output angle ratio other than the model's); refused by default",
+        "estimate even when the angles look wrong for the model (degrees instead of radians, "
+        "or a motor/output angle ratio other than the model's); refused by default",
     )
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress lines on stderr")
+    add_quiet(p)
 
 
 def command(args, parser) -> int:
