@@ -7,7 +7,7 @@ from pathlib import Path
 # compliance.estimate_torque is looked up at each call (a test stops the command there)
 from .. import compliance
 from .._errors import ConfigError, DataError, ModelMismatchError, UnitWarning
-from .._io import atomic_write_bytes, load_recording
+from .._io import atomic_write_bytes, csv_bytes, load_recording
 from .._joint import load_joint
 from .._metrics import error_metrics
 from ..config import check_compatible, load_model
@@ -68,7 +68,6 @@ def add_parser(sub) -> None:
 
 
 def command(args, parser) -> int:
-    import io
     import warnings
 
     import numpy as np
@@ -133,18 +132,9 @@ def command(args, parser) -> int:
             f"error against the measured torque: RMS {m.rms:.4g} N·m, max {m.max:.4g} N·m "
             f"({m.max_pct:.3g} % of rated)"
         )
-    buf = io.StringIO()
-    names = list(cols)
-    np.savetxt(
-        buf,
-        np.column_stack([cols[k] for k in names]),
-        delimiter=",",
-        header=",".join(names),
-        comments="",
-        fmt="%.17g",
-    )
+    data = csv_bytes(cols)
     check_output_file(out, inputs=inputs, overwrite=args.overwrite, ours=is_estimate)
-    atomic_write_bytes(out, buf.getvalue().encode())
+    atomic_write_bytes(out, data)
     progress(f"wrote {out}")
     return 0
 
