@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax
@@ -325,7 +326,7 @@ def calibration_solution(
     residual_rms: float,
     n_samples: int,
     segment_counts,
-    dropped: list[str],
+    dropped: Sequence[str],
     t0: float,
 ) -> Solution:
     """The [`hdjax.Solution`][] of a calibration of `model`, batch or streamed.
