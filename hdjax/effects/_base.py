@@ -272,7 +272,7 @@ class AbstractPlantEffect(eqx.Module):
         return PlantEffect(name, slot, defaults, cls.from_params)
 
     @classmethod
-    def from_params(cls, name: str, params: Mapping):
+    def from_params(cls, name: str, params: Mapping) -> AbstractPlantEffect:
         """The effect `name` from its parameters `params` (field name -> value; the static
         fields are passed as they are), after checking each array parameter's shape, that it
         is finite and its [`bound`][]; `ConfigError` naming the parameter otherwise."""

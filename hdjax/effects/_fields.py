@@ -73,6 +73,11 @@ def labels(key: str, *names: str) -> tuple[property, Callable]:
     return property(key_, doc=f"The vocabulary key: {key}."), names_
 
 
+# ---------------------------------------------------------------------------------------------
+# Declaring a plant effect: parameter fields and their checks
+# ---------------------------------------------------------------------------------------------
+
+
 BOUNDS = ("finite", "nonneg", "positive")
 """What [`bound`][] can require of a plant-effect parameter (every one must be finite)."""
 
@@ -125,6 +130,11 @@ def vector(name: str, field: str, value):
             f"effect {name!r}: parameter {field!r} must be a 1-D list, got shape {arr.shape}"
         )
     return f64(value)
+
+
+# ---------------------------------------------------------------------------------------------
+# Numbers of candidates
+# ---------------------------------------------------------------------------------------------
 
 
 def rounded(x: float, digits: int = 4) -> float:
