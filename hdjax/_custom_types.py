@@ -4,6 +4,7 @@ import os
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int, PRNGKeyArray, PyTree, Real, Shaped
 
 Samples = Float[Array, " n"]
@@ -11,6 +12,20 @@ Samples = Float[Array, " n"]
 
 Design = Float[Array, "n n_terms"]
 """A design matrix: one row per sample, one column per model term."""
+
+SamplesLike = Real[ArrayLike, " n"]
+"""A real signal with one value per sample, as an array of either library (a torque, a
+residual)."""
+
+NumpyDesign = Float[np.ndarray, "n n_terms"]
+"""[`Design`][] computed in NumPy (the reference a JAX design is tested against)."""
+
+Pointwise = Real[ArrayLike, "*shape"]
+"""The input of a pointwise law (a speed, a torque, an angle): any shape, a number included;
+the arguments so annotated in one call share their shape with a [`PointwiseOut`][] result."""
+
+PointwiseOut = Float[Array, "*shape"]
+"""The value of a pointwise law, shaped like its [`Pointwise`][] input."""
 
 Scalar = Real[ArrayLike, ""]
 """A real number: a Python int or float, or a 0-d array (a module field that JAX may trace, as
@@ -26,7 +41,6 @@ PathLike = str | os.PathLike[str]
 __all__ = [
     "ArrayInput",
     "PathLike",
-    "Shaped",
     "Array",
     "ArrayLike",
     "Bool",
@@ -35,7 +49,12 @@ __all__ = [
     "PRNGKeyArray",
     "PyTree",
     "Real",
+    "Shaped",
     "Samples",
+    "SamplesLike",
     "Design",
+    "NumpyDesign",
+    "Pointwise",
+    "PointwiseOut",
     "Scalar",
 ]

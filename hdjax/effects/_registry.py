@@ -112,7 +112,7 @@ def discover_families() -> tuple[str, ...]:
 
 def vocabulary() -> str:
     """The keys a discover report can name (the report's `vocabulary` entry)."""
-    return ", ".join(f.vocabulary for f in _FAMILIES if f.vocabulary)
+    return ", ".join(f.vocabulary_text() for f in _FAMILIES if f.vocabulary_text())
 
 
 def library_options() -> dict:
