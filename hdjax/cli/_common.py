@@ -9,8 +9,6 @@ import time
 from .._errors import ConfigError, did_you_mean
 from .._interrupts import check
 from .._io import TOML_HINT, ColumnMap, read_text
-from ..config import parse_toml, parse_value
-from ..config._dataset import resolve_path
 
 
 class UsageError(Exception):
@@ -86,6 +84,8 @@ def parse_overrides(items: list[str] | None) -> dict:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise ConfigError(f"--set expects KEY=VALUE (e.g. model.poly_order=4), got {item!r}")
+        from ..config import parse_value  # hdjax.config is heavy: imported on use
+
         out[key.strip()] = parse_value(value.strip())
     return out
 
@@ -112,6 +112,8 @@ def experiment_inputs(exp) -> list:
     names (train, test and any other file setting), for the output rules of
     [`hdjax.report.check_output_dir`][]."""
     from pathlib import Path
+
+    from ..config._dataset import resolve_path  # hdjax.config is heavy: imported on use
 
     paths = [exp.path] if getattr(exp, "path", None) is not None else []
 
@@ -141,6 +143,8 @@ def read_column_map(path):
     `columns`, `extras` and the CSV text `encoding`; other keys of the table are ignored, so an
     experiment config serves as a column map."""
     from pathlib import Path
+
+    from ..config import parse_toml  # hdjax.config is heavy: imported on use
 
     cpath = Path(path)
     if not cpath.exists():
