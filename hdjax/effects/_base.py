@@ -24,6 +24,7 @@ import dataclasses
 import functools
 import typing
 from collections.abc import Callable, Mapping
+from types import ModuleType
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -160,7 +161,7 @@ class AbstractSignalTerm(AbstractTorqueFreeTerm):
     `numpy`."""
 
     @abc.abstractmethod
-    def transform(self, x, xp):
+    def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         """The column as a function of the signal `x`, with array namespace `xp`."""
 
     def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
@@ -324,7 +325,7 @@ class AbstractFriction(AbstractPlantEffect):
         """The friction torque at speed `omega`."""
 
     @abc.abstractmethod
-    def max_slope(self):
+    def max_slope(self) -> Float[Array, ""]:
         """The largest slope of the friction law (a float or a 0-d array)."""
 
 
@@ -334,15 +335,15 @@ class AbstractHysteresis(AbstractPlantEffect):
     stiffness right after a reversal, for the integrator's stability check)."""
 
     @abc.abstractmethod
-    def rate(self, z, d_dot, inv=None):
+    def rate(self, z: Pointwise, d_dot: Pointwise, inv: dict | None = None) -> PointwiseOut:
         """$\\dot z$ at hysteresis torque `z` and deflection rate `d_dot`."""
 
     @abc.abstractmethod
-    def saturation(self):
+    def saturation(self) -> Float[Array, ""]:
         """The loop's half-height [N·m]."""
 
     @abc.abstractmethod
-    def initial_stiffness(self):
+    def initial_stiffness(self) -> Float[Array, ""]:
         """$dz/dd$ right after a reversal [N·m/rad]."""
 
 
@@ -419,7 +420,7 @@ class Candidate:
 
     key: str
     family: str
-    term: object
+    term: AbstractTerm
     origin: str = "grid"
 
     @classmethod
@@ -445,9 +446,9 @@ class CandidateContext:
     passes residual ÷ torque).
     """
 
-    sig: Any
-    torque: Any
-    residual: Any
+    sig: Signals
+    torque: SamplesLike
+    residual: SamplesLike
     ratio: float
     rated_torque: float
     twist_sign: float
