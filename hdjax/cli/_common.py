@@ -10,8 +10,6 @@ from pathlib import Path
 from .._errors import ConfigError, did_you_mean
 from .._interrupts import check
 from .._io import TOML_HINT, ColumnMap, read_text
-from ..config import parse_toml, parse_value
-from ..config._dataset import resolve_path
 from ..report import ResultDir
 
 
@@ -88,6 +86,8 @@ def parse_overrides(items: list[str] | None) -> dict:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise ConfigError(f"--set expects KEY=VALUE (e.g. model.poly_order=4), got {item!r}")
+        from ..config import parse_value  # hdjax.config is heavy: imported on use
+
         out[key.strip()] = parse_value(value.strip())
     return out
 
@@ -164,6 +164,8 @@ def experiment_inputs(exp) -> list:
     [`hdjax.report.check_output_dir`][]."""
     from pathlib import Path
 
+    from ..config._dataset import resolve_path  # hdjax.config is heavy: imported on use
+
     paths = [exp.path] if getattr(exp, "path", None) is not None else []
 
     def walk(v):
@@ -192,6 +194,8 @@ def read_column_map(path):
     `columns`, `extras` and the CSV text `encoding`; other keys of the table are ignored, so an
     experiment config serves as a column map."""
     from pathlib import Path
+
+    from ..config import parse_toml  # hdjax.config is heavy: imported on use
 
     cpath = Path(path)
     if not cpath.exists():

@@ -21,7 +21,7 @@ from .. import __version__
 from .._errors import DataError, HdjaxError
 from .._io import load_recording, read_toml
 from .._joint import load_joint
-from ..config._preflight import check_read_memory
+from .._memory import check_read_memory
 from ..report import ResultDir
 from . import _loop  # `_loop.discover` looked up at call time, where a test stops the command
 from ._checks import check_inputs
