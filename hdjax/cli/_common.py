@@ -10,7 +10,6 @@ from pathlib import Path
 from .._errors import ConfigError, did_you_mean
 from .._interrupts import check
 from .._io import TOML_HINT, ColumnMap, read_text
-from ..report import ResultDir
 
 
 class UsageError(Exception):
@@ -144,10 +143,13 @@ def add_experiment_command(
     return p
 
 
-def resumable_result(out: Path, *, overwrite: bool, inputs: list, command: str) -> ResultDir:
-    """The result folder `out` of a command whose finished parts survive a failure: they are
-    written to its staging folder `OUT.partial`, which an error or an interrupt leaves in
-    place (when it holds finished work) for the next run to resume from."""
+def resumable_result(out: Path, *, overwrite: bool, inputs: list, command: str):
+    """The result folder (a `hdjax.report.ResultDir`) `out` of a command whose finished
+    parts survive a failure: they are written to its staging folder `OUT.partial`, which an
+    error or an interrupt leaves in place (when it holds finished work) for the next run to
+    resume from."""
+    from ..report import ResultDir  # hdjax.report is heavy: imported on use
+
     return ResultDir(
         out,
         overwrite=overwrite,

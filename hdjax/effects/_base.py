@@ -154,6 +154,19 @@ class AbstractTorqueFreeTerm(AbstractTerm):
     torque_kind: ClassVar[str] = "none"
 
 
+class AbstractColumnListTerm(AbstractTorqueFreeTerm):
+    """A torque-free group computed column by column: subclasses implement `column_list(sig)`,
+    one 1-D array per column (the compliance model's base design takes the list as it is, so
+    XLA fuses the columns without stacking them), and `numpy_columns`."""
+
+    @abc.abstractmethod
+    def column_list(self, sig: Signals) -> list[Float[Array, " n"]]:
+        """The columns as separate arrays, in the order of `names()`."""
+
+    def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Design:
+        return jnp.stack(self.column_list(sig), axis=1)
+
+
 class AbstractSignalTerm(AbstractTorqueFreeTerm):
     """A one-column, torque-free term that is a function of one named signal, written once for
     both array libraries: subclasses have a `signal` (a field or a property: the signal or extra
