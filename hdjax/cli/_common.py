@@ -10,9 +10,6 @@ from pathlib import Path
 from .._errors import ConfigError, did_you_mean
 from .._interrupts import check
 from .._io import TOML_HINT, ColumnMap, read_text
-from ..config import parse_toml, parse_value
-from ..config._dataset import resolve_path
-from ..report import ResultDir
 
 
 class UsageError(Exception):
@@ -88,6 +85,8 @@ def parse_overrides(items: list[str] | None) -> dict:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise ConfigError(f"--set expects KEY=VALUE (e.g. model.poly_order=4), got {item!r}")
+        from ..config import parse_value  # hdjax.config is heavy: imported on use
+
         out[key.strip()] = parse_value(value.strip())
     return out
 
@@ -144,10 +143,13 @@ def add_experiment_command(
     return p
 
 
-def resumable_result(out: Path, *, overwrite: bool, inputs: list, command: str) -> ResultDir:
-    """The result folder `out` of a command whose finished parts survive a failure: they are
-    written to its staging folder `OUT.partial`, which an error or an interrupt leaves in
-    place (when it holds finished work) for the next run to resume from."""
+def resumable_result(out: Path, *, overwrite: bool, inputs: list, command: str):
+    """The result folder (a `hdjax.report.ResultDir`) `out` of a command whose finished
+    parts survive a failure: they are written to its staging folder `OUT.partial`, which an
+    error or an interrupt leaves in place (when it holds finished work) for the next run to
+    resume from."""
+    from ..report import ResultDir  # hdjax.report is heavy: imported on use
+
     return ResultDir(
         out,
         overwrite=overwrite,
@@ -163,6 +165,8 @@ def experiment_inputs(exp) -> list:
     names (train, test and any other file setting), for the output rules of
     [`hdjax.report.check_output_dir`][]."""
     from pathlib import Path
+
+    from ..config._dataset import resolve_path  # hdjax.config is heavy: imported on use
 
     paths = [exp.path] if getattr(exp, "path", None) is not None else []
 
@@ -192,6 +196,8 @@ def read_column_map(path):
     `columns`, `extras` and the CSV text `encoding`; other keys of the table are ignored, so an
     experiment config serves as a column map."""
     from pathlib import Path
+
+    from ..config import parse_toml  # hdjax.config is heavy: imported on use
 
     cpath = Path(path)
     if not cpath.exists():

@@ -9,9 +9,9 @@ from .. import compliance
 from .._errors import ConfigError, DataError, ModelMismatchError, UnitWarning
 from .._io import atomic_write_bytes, csv_bytes, load_recording
 from .._joint import load_joint
+from .._memory import check_read_memory
 from .._metrics import error_metrics
 from ..config import check_compatible, load_model
-from ..config._preflight import check_read_memory
 from ..config._saved_model import angle_ratio_mismatch
 from ..network import predict_torque as net_estimate
 from ..report import check_output_file

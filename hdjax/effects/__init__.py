@@ -17,6 +17,7 @@ from ._base import (
     SEGMENT_START as SEGMENT_START,
     TORQUE_KINDS as TORQUE_KINDS,
     TORQUE_PATH as TORQUE_PATH,
+    AbstractColumnListTerm as AbstractColumnListTerm,
     AbstractFamily as AbstractFamily,
     AbstractFriction as AbstractFriction,
     AbstractHysteresis as AbstractHysteresis,

@@ -24,6 +24,7 @@ import dataclasses
 import functools
 import typing
 from collections.abc import Callable, Mapping
+from types import ModuleType
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -153,6 +154,19 @@ class AbstractTorqueFreeTerm(AbstractTerm):
     torque_kind: ClassVar[str] = "none"
 
 
+class AbstractColumnListTerm(AbstractTorqueFreeTerm):
+    """A torque-free group computed column by column: subclasses implement `column_list(sig)`,
+    one 1-D array per column (the compliance model's base design takes the list as it is, so
+    XLA fuses the columns without stacking them), and `numpy_columns`."""
+
+    @abc.abstractmethod
+    def column_list(self, sig: Signals) -> list[Float[Array, " n"]]:
+        """The columns as separate arrays, in the order of `names()`."""
+
+    def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Design:
+        return jnp.stack(self.column_list(sig), axis=1)
+
+
 class AbstractSignalTerm(AbstractTorqueFreeTerm):
     """A one-column, torque-free term that is a function of one named signal, written once for
     both array libraries: subclasses have a `signal` (a field or a property: the signal or extra
@@ -160,7 +174,7 @@ class AbstractSignalTerm(AbstractTorqueFreeTerm):
     `numpy`."""
 
     @abc.abstractmethod
-    def transform(self, x, xp):
+    def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         """The column as a function of the signal `x`, with array namespace `xp`."""
 
     def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
@@ -324,7 +338,7 @@ class AbstractFriction(AbstractPlantEffect):
         """The friction torque at speed `omega`."""
 
     @abc.abstractmethod
-    def max_slope(self):
+    def max_slope(self) -> Float[Array, ""]:
         """The largest slope of the friction law (a float or a 0-d array)."""
 
 
@@ -334,15 +348,15 @@ class AbstractHysteresis(AbstractPlantEffect):
     stiffness right after a reversal, for the integrator's stability check)."""
 
     @abc.abstractmethod
-    def rate(self, z, d_dot, inv=None):
+    def rate(self, z: Pointwise, d_dot: Pointwise, inv: dict | None = None) -> PointwiseOut:
         """$\\dot z$ at hysteresis torque `z` and deflection rate `d_dot`."""
 
     @abc.abstractmethod
-    def saturation(self):
+    def saturation(self) -> Float[Array, ""]:
         """The loop's half-height [N·m]."""
 
     @abc.abstractmethod
-    def initial_stiffness(self):
+    def initial_stiffness(self) -> Float[Array, ""]:
         """$dz/dd$ right after a reversal [N·m/rad]."""
 
 
@@ -419,7 +433,7 @@ class Candidate:
 
     key: str
     family: str
-    term: object
+    term: AbstractTerm
     origin: str = "grid"
 
     @classmethod
@@ -445,9 +459,9 @@ class CandidateContext:
     passes residual ÷ torque).
     """
 
-    sig: Any
-    torque: Any
-    residual: Any
+    sig: Signals
+    torque: SamplesLike
+    residual: SamplesLike
     ratio: float
     rated_torque: float
     twist_sign: float

@@ -16,12 +16,13 @@ friction", Automatica 30(7), 1994.
 
 from __future__ import annotations
 
+from types import ModuleType
 from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, Float, Pointwise, PointwiseOut
+from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, SamplesLike
 from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm
 from ._fields import bound, hyper, labels
 from ._friction import friction_effects, velocity_candidates
@@ -35,7 +36,7 @@ class Coulomb(AbstractSignalTerm):
 
     key, names = labels("coulomb:{signal}", "tanh({signal}/{omega_s})")
 
-    def transform(self, x, xp):
+    def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         return xp.tanh(x / self.omega_s)
 
 

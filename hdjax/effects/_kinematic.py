@@ -18,17 +18,16 @@ from __future__ import annotations
 from typing import ClassVar
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from .. import _trig
-from .._custom_types import Array, Design, Float, NumpyDesign, Pointwise, PointwiseOut, SamplesLike
+from .._custom_types import Array, Float, NumpyDesign, Pointwise, PointwiseOut, SamplesLike
 from .._features import Signals
 from .._trig import sincos
 from ._base import (
+    AbstractColumnListTerm,
     AbstractFamily,
     AbstractPlantEffect,
-    AbstractTorqueFreeTerm,
     Candidate,
     both_sides,
 )
@@ -47,7 +46,7 @@ def harmonic_pairs(u: PointwiseOut, order: int) -> list[tuple[PointwiseOut, Poin
     return out
 
 
-class PaperFourier(AbstractTorqueFreeTerm):
+class PaperFourier(AbstractColumnListTerm):
     """Kinematic error in the paper's form, eq. (9), without its constant $a_0$.
 
     For $n = 1..$`order`: $\\cos(n\\theta_{fso}\\omega_{fso}), \\sin(n\\theta_{fso}\\omega_{fso}),
@@ -76,9 +75,6 @@ class PaperFourier(AbstractTorqueFreeTerm):
             cols += [cl, sl, cm, sm]
         return cols
 
-    def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Design:
-        return jnp.stack(self.column_list(sig), axis=1)
-
     def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         ul = np.asarray(sig.theta_l) * np.asarray(sig.omega_l)
         um = np.asarray(sig.theta_m) * np.asarray(sig.omega_m)
@@ -88,7 +84,7 @@ class PaperFourier(AbstractTorqueFreeTerm):
         return np.column_stack(cols)
 
 
-class Harmonics(AbstractTorqueFreeTerm):
+class Harmonics(AbstractColumnListTerm):
     """Harmonics of one angle at a list of (possibly non-integer) orders: $\\cos(k\\theta),
     \\sin(k\\theta)$ per order $k$ - the kinematic error as a function of angle alone."""
 
@@ -112,9 +108,6 @@ class Harmonics(AbstractTorqueFreeTerm):
             s, c = sincos(k * theta)
             cols += [c, s]
         return cols
-
-    def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Design:
-        return jnp.stack(self.column_list(sig), axis=1)
 
     def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         th = np.asarray(sig.get(self.signal))

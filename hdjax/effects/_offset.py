@@ -17,10 +17,10 @@ import numpy as np
 
 from .._custom_types import Array, Float, SamplesLike
 from .._features import Signals
-from ._base import AbstractFamily, AbstractTorqueFreeTerm
+from ._base import AbstractColumnListTerm, AbstractFamily
 
 
-class Constant(AbstractTorqueFreeTerm):
+class Constant(AbstractColumnListTerm):
     """Constant offset $k_0 = \\omega_0/N + a_0$ (eq. (10)); also absorbs encoder offsets."""
 
     @property
@@ -32,9 +32,6 @@ class Constant(AbstractTorqueFreeTerm):
 
     def column_list(self, sig: Signals) -> list[Float[Array, " n"]]:
         return [jnp.ones((sig.n_samples,), jnp.float64)]
-
-    def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
-        return jnp.ones((sig.n_samples, 1), jnp.float64)
 
     def numpy_columns(
         self, sig: Signals, torque: SamplesLike | None = None

@@ -23,12 +23,13 @@ Section 2 (the Stribeck curve).
 
 from __future__ import annotations
 
+from types import ModuleType
 from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, Float, Pointwise, PointwiseOut
+from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, SamplesLike
 from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm
 from ._coulomb import Coulomb
 from ._fields import bound, hyper, labels
@@ -47,7 +48,7 @@ class Stribeck(AbstractSignalTerm):
         "stribeck:{signal}", "exp(-({signal}/{omega_st})^2)*tanh({signal}/{omega_s})"
     )
 
-    def transform(self, x, xp):
+    def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         u = x / self.omega_st
         return xp.exp(-(u * u)) * xp.tanh(x / self.omega_s)
 

@@ -15,11 +15,12 @@ Harmonic Drive CSG/CSF catalogue, efficiency and temperature.
 
 from __future__ import annotations
 
+from types import ModuleType
 from typing import ClassVar
 
 import numpy as np
 
-from .._custom_types import Array, Float, Pointwise, PointwiseOut, Samples
+from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, Samples, SamplesLike
 from .._features import Signals
 from ._base import (
     AbstractFamily,
@@ -45,7 +46,7 @@ class Column(AbstractSignalTerm):
         """The extra column the drift reads (its `name`)."""
         return self.name
 
-    def transform(self, x, xp):
+    def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         return (x - self.center) / self.scale
 
 

@@ -11,11 +11,12 @@ References: Song et al. 2019, Section IV.C; Armstrong-Hélouvry et al., Automati
 
 from __future__ import annotations
 
+from types import ModuleType
 from typing import ClassVar
 
 import equinox as eqx
 
-from .._custom_types import Array, Float, Pointwise, PointwiseOut
+from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, SamplesLike
 from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm
 from ._fields import bound, hyper, labels
 from ._friction import friction_effects, velocity_candidates
@@ -29,7 +30,7 @@ class Viscous(AbstractSignalTerm):
 
     key, names = labels("viscous:{signal}", "{signal}/{scale}")
 
-    def transform(self, x, xp):
+    def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         return x / self.scale
 
 

@@ -16,14 +16,14 @@ from typing import ClassVar
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, Design, Float, NumpyDesign, Pointwise, PointwiseOut, SamplesLike
+from .._custom_types import Array, Float, NumpyDesign, Pointwise, PointwiseOut, SamplesLike
 from .._errors import ConfigError
 from .._features import Signals
-from ._base import AbstractFamily, AbstractPlantEffect, AbstractTorqueFreeTerm, PlantEffect
+from ._base import AbstractColumnListTerm, AbstractFamily, AbstractPlantEffect, PlantEffect
 from ._fields import concrete, hyper
 
 
-class CurrentPolynomial(AbstractTorqueFreeTerm):
+class CurrentPolynomial(AbstractColumnListTerm):
     """Wave-generator deformation as a polynomial in current, eq. (8), without its constant.
 
     Columns $I, I^2, \\dots, I^p$; the fitted coefficient of $I^i$ is $\\omega_i / N$ (eq. (10)).
@@ -46,9 +46,6 @@ class CurrentPolynomial(AbstractTorqueFreeTerm):
         for _ in range(1, self.order):
             out.append(out[-1] * x)
         return out
-
-    def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Design:
-        return jnp.stack(self.column_list(sig), axis=1)
 
     def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         x = np.asarray(sig.current) / self.scale
