@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._custom_types import ArrayLike, Float
 from ._errors import ConfigError, DataError, check_keys, did_you_mean as did_you_mean
 from ._recording import SIGNAL_COLUMNS, Recording, make_recording
 
@@ -485,16 +486,21 @@ def atomic_write_bytes(path, data: bytes) -> None:
         raise
 
 
-def save_csv(recording: Recording, path) -> None:
-    """Write a recording as CSV (all columns, full float64 precision), atomically."""
-    cols = recording.to_numpy()
-    names = list(cols)
+def csv_bytes(columns: dict[str, Float[ArrayLike, " n"]]) -> bytes:
+    """Columns (name -> values) as the bytes of a CSV file: a header of the names, then one
+    row per sample in full float64 precision (`%.17g`, which reads back exactly)."""
     import io
 
     buf = io.StringIO()
-    body = np.column_stack([cols[k] for k in names])
+    names = list(columns)
+    body = np.column_stack([np.asarray(columns[k]) for k in names])
     np.savetxt(buf, body, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
-    atomic_write_bytes(path, buf.getvalue().encode())
+    return buf.getvalue().encode()
+
+
+def save_csv(recording: Recording, path) -> None:
+    """Write a recording as CSV (all columns, full float64 precision), atomically."""
+    atomic_write_bytes(path, csv_bytes(recording.to_numpy()))
 
 
 def save_npz(recording: Recording, path) -> None:
