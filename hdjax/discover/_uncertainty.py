@@ -8,6 +8,13 @@ blocks of `length` samples, no shorter than the residual's correlation length, d
 replacement until they cover the record; block sums are precomputed by cumulative sums, so a
 few hundred replicates cost little.
 
+**Partialling out.** The projections onto the other columns come from the design's Gram
+matrix, formed once for all effects ([`partial_out`][]): per effect a small Cholesky solve on
+the Jacobi-scaled Gram block of the other columns, refined once with the true residual (the
+corrected semi-normal equations of [`hdjax.compliance.calibrate_lstsq`][], as accurate as QR
+while the scaled condition number is at most `CSNE_MAX_COND`; above it, a QR of those columns).
+No $n \times p$ factor is formed per effect, and no scaled copy of the design.
+
 **Amplitude.** A harmonic's is $\\sqrt{a^2 + b^2}$ (the twist it adds at its peak); a
 one-column effect's is its coefficient times the column's largest magnitude over TRAIN (signed:
 the twist it adds at its extreme, e.g. a Coulomb level). It is given in arcsec of twist and in
@@ -24,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..compliance import ComplianceModel
+from ..compliance._lstsq import CSNE_MAX_COND
 from ._folds import correlation_length
 from ._pipeline import PipelineData
 
@@ -75,9 +83,7 @@ def effect_intervals(
     active = np.asarray(model.active)
     y = data.twist
     n = y.size
-    scale = np.sqrt((design * design).sum(axis=0))
-    scale[scale == 0] = 1.0
-    ds = design / scale
+    gram = _gram(design, y)
     comp = _local_compliance(model, np.asarray(estimate))
     rng = np.random.default_rng(seed)
     length = int(max(1, min(length, n // 4)))
@@ -90,10 +96,8 @@ def effect_intervals(
         sl = np.arange(i, i + m)
         i += m
         others = np.flatnonzero(active & ~np.isin(np.arange(model.n_coef), sl))
-        q, _ = np.linalg.qr(ds[:, others])
         x = design[:, sl]
-        xp = x - q @ (q.T @ x)
-        yp = y - q @ (q.T @ y)
+        xp, yp = partial_out(design, y, others, sl, gram)
         beta = np.linalg.lstsq(xp, yp, rcond=None)[0]
         peak = np.abs(x).max(axis=0)
         amp = float(_amplitude(term, beta[None, :], peak)[0])
@@ -121,3 +125,62 @@ def effect_intervals(
             )
         )
     return out
+
+
+def _gram(design: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The Gram matrix of `[design | y]`, without forming that matrix."""
+    p = design.shape[1]
+    g = np.empty((p + 1, p + 1))
+    g[:p, :p] = design.T @ design
+    g[:p, p] = g[p, :p] = y @ design
+    g[p, p] = y @ y
+    return g
+
+
+def partial_out(
+    design: np.ndarray, y: np.ndarray, others: np.ndarray, cols: np.ndarray, gram: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The columns `cols` of `design` and the target `y`, each made orthogonal to the columns
+    `others` (the residuals of their least-squares fits on them, Frisch-Waugh-Lovell).
+
+    `gram` is the Gram matrix of `[design | y]`. The fits are the corrected semi-normal
+    equations on the Jacobi-scaled Gram block of `others` (one refinement step with the true
+    residual), or, above `CSNE_MAX_COND` or when Cholesky fails, a QR of those columns.
+    **Returns:** `(x_perp, y_perp)`, shapes `(n, len(cols))` and `(n,)`.
+    """
+    import scipy.linalg
+
+    p = design.shape[1]
+    target = np.concatenate([design[:, cols], y[:, None]], axis=1)
+    if others.size == 0:
+        return target[:, :-1], target[:, -1]
+    d = np.sqrt(np.diag(gram)[others])
+    d[d == 0] = 1.0
+    gs = gram[np.ix_(others, others)] / np.outer(d, d)
+    factor = None
+    ev = np.linalg.eigvalsh(gs)
+    if ev[0] > 0 and np.sqrt(ev[-1] / ev[0]) <= CSNE_MAX_COND:
+        try:
+            factor = scipy.linalg.cho_factor(gs, lower=False, check_finite=False)
+        except np.linalg.LinAlgError:
+            factor = None
+    if factor is None:
+        q, _ = np.linalg.qr(design[:, others] / d)
+        t = target - q @ (q.T @ target)
+        return t[:, :-1], t[:, -1]
+    # coefficients on all columns, zero off `others`, so no copy of those columns is made
+    w = np.zeros((p, target.shape[1]))
+    w[others] = (
+        scipy.linalg.cho_solve(
+            factor, gram[np.ix_(others, np.r_[cols, p])] / d[:, None], check_finite=False
+        )
+        / d[:, None]
+    )
+    r = target - design @ w
+    # one refinement step with the true residual removes the squared condition number
+    w[others] += (
+        scipy.linalg.cho_solve(factor, (design.T @ r)[others] / d[:, None], check_finite=False)
+        / d[:, None]
+    )
+    t = target - design @ w
+    return t[:, :-1], t[:, -1]
