@@ -2,15 +2,20 @@
 
 Target: <= 60 s wall on this 2-core CPU, compilation included. The command runs as a user
 runs it (`hdjax discover --train --test --joint --out`, figures included, `--no-cache`), on
-recordings with three undeclared effects; its peak resident memory is measured
-(getrusage of the child). Reference, timed in the same run: loading the training CSV and
-calibrating the paper's model on it in this process (the loop's first step).
+recordings with three undeclared effects; its wall and CPU time (user + system of the child:
+on a shared machine the CPU time is the figure that does not depend on the load, which is
+recorded at the start and the end) and its peak resident memory (getrusage of the child) are
+measured, with the loop's own wall/CPU seconds per phase (its last progress line).
+Reference, timed in the same run: loading the training CSV and calibrating the paper's model
+on it in this process (the loop's first step).
 
     python benchmarks/bench_discover_long.py [--samples 1000000]
 """
 
 import argparse
 import json
+import os
+import re
 import resource
 import shutil
 import subprocess
@@ -26,6 +31,15 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(HERE))
 
 from _long_logs import machine  # noqa: E402
+
+
+def _phases(stderr: str) -> dict:
+    """The loop's `phases [s wall / s cpu]: name w/c, ...` line as `{name: [wall, cpu]}`."""
+    line = next((x for x in stderr.splitlines()[::-1] if "phases [s wall / s cpu]" in x), "")
+    return {
+        m[1]: [float(m[2]), float(m[3])]
+        for m in re.finditer(r"([A-Za-z][\w ]*?) ([\d.]+)/([\d.]+)", line.split(":", 1)[-1])
+    }
 
 
 def main():
@@ -52,7 +66,7 @@ def main():
         cmd = [
             sys.executable, "-m", "hdjax", "discover", "--train", str(tmp / "train.csv"),
             "--test", str(tmp / "test.csv"), "--joint", str(tmp / "joint.toml"),
-            "--out", str(tmp / "out"), "--no-cache", "--quiet",
+            "--out", str(tmp / "out"), "--no-cache",
         ]  # fmt: skip
         t0 = time.perf_counter()
         c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -65,6 +79,7 @@ def main():
             json.loads((tmp / "out" / "report.json").read_text()) if not proc.returncode else {}
         )
         found = set(report.get("effects") or [])
+        load_end = [round(x, 2) for x in os.getloadavg()]
         # reference: the first step of the loop, in this process
         t0 = time.perf_counter()
         train = hdjax.load_csv(tmp / "train.csv")
@@ -79,11 +94,14 @@ def main():
         out.update(
             train_samples=args.samples,
             exit_code=proc.returncode,
-            stderr_tail=proc.stderr[-500:],
+            stderr_tail=proc.stderr[-500:] if proc.returncode else "",
             wall_s=wall,
             cpu_s=cpu,
+            load_average_1_5_15_end=load_end,
+            phases_wall_cpu_s=_phases(proc.stderr),
             peak_rss_gb=peak,
-            effects=sorted(found),
+            effects=report.get("effects") or [],
+            test_rms=(report.get("final") or {}).get("rms"),
             expected_found=sorted(EXPECTED & found),
             reference={"load_csv_s": load_s, "baseline_calibration_s": cal_s},
             target_seconds=60.0,

@@ -5,6 +5,12 @@ start included) and compiles nothing that takes longer than 0.1 s (JAX's backend
 events). Reference, timed in the same run: the same command with `--no-cache` (cold). The
 cache lives in a temporary XDG_CACHE_HOME, deleted afterwards.
 
+Each run reports its wall time and its process CPU time (all threads): on a shared machine
+the wall time grows with the load (recorded before and after each run), the CPU time much
+less. The second run also splits its CPU time into the import of `hdjax.cli` and the command,
+and sums JAX's trace, lowering and cache-load times of its compiled programs (wall seconds).
+Precision: float64 throughout (the CLI's x64 mode).
+
     python benchmarks/bench_warm_start.py [--samples 50000]
 """
 
@@ -27,17 +33,27 @@ sys.path.insert(0, str(HERE))
 from _long_logs import machine  # noqa: E402
 
 PROBE = """
-import json, sys
+import json, sys, time
+c0 = time.process_time()
 import jax.monitoring as mon
-compiles, hits = [], []
+compiles, hits, stages = [], [], {}
 COMPILE = "/jax/core/compile/backend_compile_duration"
-mon.register_event_duration_secs_listener(
-    lambda e, d, **k: compiles.append(d) if e == COMPILE else 0)
+STAGES = ("jaxpr_trace_duration", "jaxpr_to_mlir_module_duration", "backend_compile_duration")
+def on_duration(e, d, **k):
+    if e == COMPILE:
+        compiles.append(d)
+    name = e.rsplit("/", 1)[-1]
+    if name in STAGES:
+        stages[name] = stages.get(name, 0.0) + d
+mon.register_event_duration_secs_listener(on_duration)
 mon.register_event_listener(
     lambda e, **k: hits.append(1) if e == "/jax/compilation_cache/cache_hits" else 0)
 from hdjax.cli import main
+c1 = time.process_time()
 code = main(sys.argv[1:])
-print(json.dumps({"code": code, "compiles": compiles, "hits": len(hits)}))
+c2 = time.process_time()
+print(json.dumps({"code": code, "compiles": compiles, "hits": len(hits), "stages": stages,
+                  "cpu_import": c1 - c0, "cpu_command": c2 - c1}))
 """
 
 
@@ -47,6 +63,7 @@ def _children_cpu() -> float:
 
 
 def run(args, env):
+    load_before = round(os.getloadavg()[0], 2)
     t0, c0 = time.perf_counter(), _children_cpu()
     out = subprocess.run(
         [sys.executable, "-c", PROBE, *args], cwd=REPO, env=env, capture_output=True, text=True
@@ -63,6 +80,10 @@ def run(args, env):
         "wall_s": wall,
         # the child's process time (all its threads): the work done, whatever the machine's load
         "cpu_s": cpu,
+        "load_1min_before_after": [load_before, round(os.getloadavg()[0], 2)],
+        "cpu_s_import_hdjax_cli": probe["cpu_import"],
+        "cpu_s_command": probe["cpu_command"],
+        "jax_trace_lower_load_s": {k: round(v, 3) for k, v in probe["stages"].items()},
         "exit_code": probe["code"],
         # JAX's backend-compile event times a compilation or, on a hit, the cache load
         "n_compile_events": len(c),

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._custom_types import ArrayLike, Float
 from ._errors import ConfigError, DataError, check_keys, did_you_mean as did_you_mean
 from ._recording import SIGNAL_COLUMNS, Recording, make_recording
 
@@ -269,6 +270,9 @@ def _read_csv_table(path: Path, encoding: str | None = None) -> tuple[list[str],
             header = [h.strip() for h in next(reader)]
         except StopIteration:
             raise DataError(f"{path}: the file is empty; expected a header row") from None
+        body = _plain_body(text, len(header))
+        if body is not None and any(header) and len(set(header)) == len(header):
+            return header, body
         rows = list(reader)
     except csv.Error as err:
         raise DataError(f"{path}: not a readable CSV file ({err}); check the file") from None
@@ -281,6 +285,27 @@ def _read_csv_table(path: Path, encoding: str | None = None) -> tuple[list[str],
     if not rows:
         raise DataError(f"{path}: the file has a header but no data rows")
     return header, parse_cells(path, header, rows, 2)
+
+
+def _plain_body(text: str, n_columns: int) -> np.ndarray | None:
+    """The body of a plain CSV text (no quotes; every row `n_columns` numbers separated by
+    commas), read by NumPy's C parser, several times faster than cell by cell; `None` for
+    anything else (an empty cell, a quote, a ragged row, a word), which the careful parser then
+    reads or refuses with the bad cell named. Both parse a number to the same float64."""
+    import io
+    import warnings
+
+    if '"' in text:
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # "input contained no data" is a fall-back too
+            body = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, ndmin=2, comments=None)
+    except (ValueError, UserWarning):
+        return None
+    if body.dtype != np.float64 or body.shape[0] == 0 or body.shape[1] != n_columns:
+        return None
+    return body
 
 
 def parse_cells(
@@ -461,16 +486,21 @@ def atomic_write_bytes(path, data: bytes) -> None:
         raise
 
 
-def save_csv(recording: Recording, path) -> None:
-    """Write a recording as CSV (all columns, full float64 precision), atomically."""
-    cols = recording.to_numpy()
-    names = list(cols)
+def csv_bytes(columns: dict[str, Float[ArrayLike, " n"]]) -> bytes:
+    """Columns (name -> values) as the bytes of a CSV file: a header of the names, then one
+    row per sample in full float64 precision (`%.17g`, which reads back exactly)."""
     import io
 
     buf = io.StringIO()
-    body = np.column_stack([cols[k] for k in names])
+    names = list(columns)
+    body = np.column_stack([np.asarray(columns[k]) for k in names])
     np.savetxt(buf, body, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
-    atomic_write_bytes(path, buf.getvalue().encode())
+    return buf.getvalue().encode()
+
+
+def save_csv(recording: Recording, path) -> None:
+    """Write a recording as CSV (all columns, full float64 precision), atomically."""
+    atomic_write_bytes(path, csv_bytes(recording.to_numpy()))
 
 
 def save_npz(recording: Recording, path) -> None:

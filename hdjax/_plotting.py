@@ -28,6 +28,21 @@ def pyplot():
     return plt
 
 
+def fixed_margins(
+    fig, *, left=0.8, right=0.2, bottom=0.55, top=0.35, hspace=0.55, wspace=0.3
+) -> None:
+    """Margins in inches (axis labels and a title fit), instead of `tight_layout`.
+
+    `tight_layout` measures every text by drawing the figure, and leaves a layout engine that
+    makes `savefig` draw it once more: three draws per figure, most of a report's figure time.
+    """
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(
+        left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h,
+        hspace=hspace, wspace=wspace,
+    )  # fmt: skip
+
+
 def save_figure(fig, path, *, dpi: int = 110) -> None:
     """Write `fig` to `path` and close it."""
     fig.savefig(path, dpi=dpi)

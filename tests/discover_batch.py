@@ -29,25 +29,11 @@ _run = jax.jit(_run.__wrapped__, static_argnums=(3,))
 
 
 def swing_drive(params, *, amplitude: float, period: float, duration: float, dt: float = DT):
-    """A `slow`-like drive with its own swing: the link follows $\\pi/2 - A\\cos\\omega t$
-    (amplitude `amplitude` [rad], period `period` [s]) with weights at arm lengths that change
-    once per period (0.5, 0.75, 1.0 of the longest, loads up to 0.95 rated), so the gravity
-    load is a smooth function of the output angle times a slowly changing arm."""
-    rated = float(np.asarray(params.rated_torque))
-    n = int(round(duration / dt))
-    t = np.arange(n) * dt
-    w = 2.0 * np.pi / period
-    theta = np.pi / 2 - amplitude * np.cos(w * t)
-    omega = amplitude * w * np.sin(w * t)
-    alpha = amplitude * w * w * np.cos(w * t)
-    arms = np.array([0.5, 0.75, 1.0])
-    k = np.floor(t / period).astype(int)
-    blend = np.clip((t - k * period) / 1.0, 0.0, 1.0)
-    blend = blend * blend * (3.0 - 2.0 * blend)
-    now, prev = arms[k % 3], arms[(k - 1) % 3]
-    arm = np.where(k == 0, now, prev + (now - prev) * blend)
-    f = lambda x: jnp.asarray(x, jnp.float64)
-    return plant.Drive(f(theta), f(omega), f(alpha), f(-0.95 * rated * arm), f(np.zeros(n)))
+    """A `slow`-like drive with its own swing ([`hdjax.plant.swing_drive`][]), the arm moved over
+    1 s at the start of each period."""
+    return plant.swing_drive(
+        params, amplitude=amplitude, period=period, duration=duration, dt=dt, rope_time=1.0
+    )
 
 
 def simulate_draws(params_list, scenarios, seeds, *, duration, output_period, skip=0.5, swing=None):

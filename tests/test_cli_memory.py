@@ -3,7 +3,7 @@ memory, before reading them (the free memory is patched small; the logs are real
 
 import pytest
 
-import hdjax.config._preflight as preflight
+import hdjax._memory as preflight
 from hdjax import Joint, save_csv
 from hdjax.cli import main
 from hdjax.config import synthetic_recording

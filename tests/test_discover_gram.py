@@ -12,7 +12,7 @@ import pytest
 import scipy.linalg
 
 from hdjax.discover._folds import contiguous_blocks, fold_assignment
-from hdjax.discover._gram import block_statistics, fold_gains
+from hdjax.discover._gram import block_statistics, block_statistics_batched, fold_gains
 from hdjax.discover._pipeline import FoldSolver, _fold_solve
 from hdjax.discover._select import cv_gains, fold_basis
 
@@ -81,6 +81,24 @@ def test_scores_do_not_depend_on_the_chunk():
     np.testing.assert_allclose(one[1], whole[1], rtol=0, atol=1e-9)
 
 
+def test_scores_do_not_depend_on_the_batches():
+    # the candidates' columns streamed in batches (a generator, as the loop computes them)
+    # score as when all are held at once: each group's statistics are its own, so only the
+    # rounding of the base-projection solves differs (per batch of right-hand sides), which
+    # the ill-conditioned design (monomials to x^7) amplifies to a few 1e-12
+    a, groups, y, blocks = _problem(5)
+    fob = np.random.default_rng(1).permutation(np.arange(int(blocks.max()) + 1) % 5)
+    whole = fold_gains(block_statistics(a, groups, y, blocks, chunk=900), fob, 5)
+    for sizes in ([1, 1, 1, 1, 1], [2, 0, 3], [4, 1]):
+        edges = np.cumsum([0] + sizes)
+        batches = (groups[lo:hi] for lo, hi in zip(edges[:-1], edges[1:]))
+        stats = block_statistics_batched(a, batches, y, blocks, chunk=900)
+        assert stats.widths == tuple(g.shape[1] for g in groups)
+        got = fold_gains(stats, fob, 5)
+        np.testing.assert_allclose(got[0], whole[0], rtol=0, atol=1e-10)
+        np.testing.assert_allclose(got[1], whole[1], rtol=0, atol=1e-10)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_fold_solver_equals_lstsq_on_the_training_rows(seed):
     a, _, y, blocks = _problem(seed)
@@ -96,3 +114,18 @@ def test_fold_solver_equals_lstsq_on_the_training_rows(seed):
         got = solver.solve(te)
         assert got[~active].tolist() == [0.0] * int((~active).sum())
         np.testing.assert_allclose(a @ got, a @ ref, rtol=0, atol=1e-7 * np.abs(y).max())
+
+
+def test_usable_check_equals_the_whole_array_check():
+    from hdjax.discover._loop import _usable
+
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((500, 2))
+    cases = [x, x[:, :1], np.ones((500, 2)), np.column_stack([np.ones(500), x[:, 0]])]
+    for bad in (np.nan, np.inf, -np.inf):
+        y = x.copy()
+        y[123, 1] = bad
+        cases.append(y)
+    for c in cases:
+        # the former check: all finite, and some column not constant
+        assert _usable(c) == bool(np.isfinite(c).all() and np.ptp(c, axis=0).max() > 0)

@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from jaxtyping import Array, Float
 
 import hdjax
 from hdjax import effects, plant
@@ -32,35 +33,22 @@ JOINT = hdjax.Joint(ratio=160, rated_torque=400)
 # -- the toy family: everything a family needs, in one place ------------------------------------
 
 
-class Drag(effects.AbstractTorqueFreeTerm):
+class Drag(effects.AbstractSignalTerm):
     """Twist signature of quadratic drag: $\\omega|\\omega|/s^2$ of a velocity."""
 
-    signal: str = eqx.field(default="omega_l", static=True)
-    scale: float = eqx.field(default=1.0, static=True)
+    signal: str = effects.hyper("omega_l")
+    scale: float = effects.hyper(1.0, positive=True)
 
-    @property
-    def key(self) -> str:
-        return f"drag:{self.signal}"
+    key, names = effects.labels("drag:{signal}", "{signal}|{signal}|/{scale}^2")
 
-    def names(self):
-        return (f"{self.signal}|{self.signal}|/{effects.fmt(self.scale)}^2",)
-
-    def columns(self, sig, torque=None):
-        w = sig.get(self.signal)
-        return (w * jnp.abs(w) / self.scale**2)[:, None]
-
-    def numpy_columns(self, sig, torque=None):
-        w = np.asarray(sig.get(self.signal))
-        return (w * np.abs(w) / self.scale**2)[:, None]
+    def transform(self, x, xp):
+        return x * xp.abs(x) / self.scale**2
 
 
 class QuadraticDrag(effects.AbstractFriction):
     """Drag torque $c\\,\\omega|\\omega|$ [N·m] (flat at rest: no slope to limit the step)."""
 
-    coefficient: jax.Array
-
-    def reciprocals(self):
-        return {}
+    coefficient: Float[Array, ""] = effects.bound("nonneg")
 
     def __call__(self, omega, inv=None):
         return self.coefficient * omega * jnp.abs(omega)
@@ -69,35 +57,25 @@ class QuadraticDrag(effects.AbstractFriction):
         return 0.0
 
 
-def _build(name, p):
-    effects.require(name, "coefficient", p["coefficient"], nonneg=True, shape=())
-    return QuadraticDrag(effects.f64(p["coefficient"]))
-
-
 class DragFamily(effects.AbstractFamily):
     """Quadratic drag of the output bearing (toy)."""
 
     name: ClassVar[str] = "toy_drag"
     terms: ClassVar[tuple] = (Drag,)
     plant_effects: ClassVar[tuple] = (
-        effects.PlantEffect(
-            "drag_l", "output_friction", lambda rated, k1, given: {"coefficient": 1.0}, _build
+        QuadraticDrag.entry(
+            "drag_l", "output_friction", lambda rated, k1, given: {"coefficient": 1.0}
         ),
     )
     discover_families: ClassVar[tuple] = ("drag:omega_l",)
-    vocabulary: ClassVar[str] = "drag:omega_l"
     options: ClassVar[dict] = {"drag_scale_fractions": (1.0,)}
 
     def candidates(self, ctx):
         if not ctx.wants("drag:omega_l"):
             return []
-        w = np.asarray(ctx.sig.omega_l)
-        rms = float(np.sqrt(np.mean(w**2)))
-        return [
-            effects.Candidate("drag:omega_l", "drag:omega_l", Drag("omega_l", frac * rms))
-            for frac in ctx.option(self, "drag_scale_fractions")
-            if rms > 0
-        ]
+        rms = float(np.sqrt(np.mean(np.asarray(ctx.sig.omega_l) ** 2)))
+        fractions = ctx.option(self, "drag_scale_fractions")
+        return [effects.Candidate.of(Drag("omega_l", f * rms)) for f in fractions if rms > 0]
 
 
 @pytest.fixture(scope="module")

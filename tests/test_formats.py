@@ -8,6 +8,7 @@ import pytest
 
 import hdjax
 from hdjax._formats import iter_recordings, load
+from hdjax._io import csv_bytes
 from hdjax.cli import main
 
 N = 257  # odd, so chunks of 64 leave a one-row tail (folded into the last chunk)
@@ -50,15 +51,7 @@ def reference(tmp_path_factory):
     d = tmp_path_factory.mktemp("formats")
     raw = raw_log()
     path = d / "log.csv"
-    names = list(raw)
-    np.savetxt(
-        path,
-        np.column_stack([raw[k] for k in names]),
-        delimiter=",",
-        header=",".join(names),
-        comments="",
-        fmt="%.17g",
-    )
+    path.write_bytes(csv_bytes(raw))
     return d, raw, path, hdjax.load_csv(path, CMAP)
 
 

@@ -452,7 +452,7 @@ def effect_families_table() -> str:
     ]
     for family in effects.families():
         doc = (inspect.getdoc(type(family)) or "").split("\n\n")[0].replace("\n", " ")
-        keys = ", ".join(f"`{k.strip()}`" for k in family.vocabulary.split(",") if k.strip())
+        keys = ", ".join(f"`{k.strip()}`" for k in family.vocabulary_text().split(",") if k.strip())
         plant = ", ".join(f"`{p.name}`" for p in family.plant_effects)
         rows.append(f"| `{family.name}` | {keys or 'not proposed'} | {plant} | {_cell(doc)} |")
     return "\n".join(rows) + "\n"

@@ -10,6 +10,7 @@ or option gets a "did you mean" answer. SIGINT and SIGTERM end a command with ex
 from __future__ import annotations
 
 import errno
+import importlib
 import os
 import sys
 import warnings
@@ -18,11 +19,20 @@ from .. import __version__
 from .._cache import disable_compilation_cache, enable_compilation_cache
 from .._errors import HdjaxError, did_you_mean
 from .._interrupts import Interrupted, handling, pending
-from ..discover import _cli as _discover
-from . import _bench, _convert, _estimate, _fleet, _run, _sweep
 from ._common import Parser, ParserExit, UsageError
 
-COMMANDS = ("run", "sweep", "estimate", "discover", "bench", "convert", "fleet")
+# Each command's module (`add_parser`, `command`), imported only when that command runs or the
+# overview is printed: together they pull in every sub-package (about a second of start-up).
+_MODULES = {
+    "run": "hdjax.cli._run",
+    "sweep": "hdjax.cli._sweep",
+    "estimate": "hdjax.cli._estimate",
+    "discover": "hdjax.discover._cli",
+    "bench": "hdjax.cli._bench",
+    "convert": "hdjax.cli._convert",
+    "fleet": "hdjax.cli._fleet",
+}
+COMMANDS = tuple(_MODULES)
 
 DESCRIPTION = """\
 Torque estimation for robotic joints with harmonic drives (Song et al. 2019), in JAX.
@@ -36,7 +46,7 @@ example:
 """
 
 
-def _parser() -> Parser:
+def _parser(only: str | None = None) -> Parser:
     p = Parser(prog="hdjax", description=DESCRIPTION, epilog=EXAMPLE)
     p.add_argument("--version", action="store_true", help="print the version and exit")
     p.add_argument(
@@ -45,13 +55,8 @@ def _parser() -> Parser:
         help="do not use the compilation cache in $XDG_CACHE_HOME/hdjax (any command takes it)",
     )
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
-    _run.add_parser(sub)
-    _sweep.add_parser(sub)
-    _estimate.add_parser(sub)
-    _discover.add_parser(sub)
-    _bench.add_parser(sub)
-    _convert.add_parser(sub)
-    _fleet.add_parser(sub)
+    for name in COMMANDS if only is None else (only,):
+        importlib.import_module(_MODULES[name]).add_parser(sub)
     return p
 
 
@@ -61,25 +66,18 @@ def _dispatch(argv: list[str]) -> int:
             f"hdjax: unknown command {argv[0]!r}{did_you_mean(argv[0], COMMANDS)}; commands: "
             f"{', '.join(COMMANDS)}"
         )
-    parser = _parser()
     if not argv or argv[0].startswith("-"):
+        parser = _parser()
         args = parser.parse_strict(argv)
         if args.version:
             print(f"hdjax {__version__}")
         else:
             parser.print_help()
         return 0
+    parser = _parser(only=argv[0])
     sub = parser._subparsers._group_actions[0].choices[argv[0]]
     args = sub.parse_strict(argv[1:])
-    handlers = {
-        "run": _run,
-        "sweep": _sweep,
-        "estimate": _estimate,
-        "discover": _discover,
-        "bench": _bench,
-    }
-    handlers["convert"], handlers["fleet"] = _convert, _fleet
-    return handlers[argv[0]].command(args, sub)
+    return importlib.import_module(_MODULES[argv[0]]).command(args, sub)
 
 
 def _compilation_cache(argv: list[str]) -> list[str]:

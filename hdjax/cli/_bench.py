@@ -8,7 +8,7 @@ from ..compliance import ComplianceModel, calibrate_lstsq, estimate_torque
 from ..compliance._nested import nested_fit
 from ..config import check_memory, synthetic_recording
 from ..pipelines._paper import PAPER_MS_PER_100, stacked_signals
-from ._common import Progress
+from ._common import Progress, add_command, add_quiet
 
 HELP = "time estimation and the polynomial-order sweep on this machine (prints JSON)"
 EXAMPLE = """\
@@ -23,10 +23,10 @@ polynomial order 1-8 against one order-6 fit on the same data (target: ratio < 3
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("bench", help=HELP, description=HELP, epilog=EXAMPLE)
+    p = add_command(sub, "bench", HELP, EXAMPLE)
     p.add_argument("--samples", type=int, default=100_000, help="training samples (default 1e5)")
     p.add_argument("--repeats", type=int, default=5, help="timing repeats; the minimum is kept")
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress lines on stderr")
+    add_quiet(p)
 
 
 def command(args, parser) -> int:

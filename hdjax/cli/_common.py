@@ -5,12 +5,11 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
 
 from .._errors import ConfigError, did_you_mean
 from .._interrupts import check
 from .._io import TOML_HINT, ColumnMap, read_text
-from ..config import parse_toml, parse_value
-from ..config._dataset import resolve_path
 
 
 class UsageError(Exception):
@@ -86,11 +85,47 @@ def parse_overrides(items: list[str] | None) -> dict:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise ConfigError(f"--set expects KEY=VALUE (e.g. model.poly_order=4), got {item!r}")
+        from ..config import parse_value  # hdjax.config is heavy: imported on use
+
         out[key.strip()] = parse_value(value.strip())
     return out
 
 
-def add_common(p: argparse.ArgumentParser) -> None:
+RESULT_OVERWRITE = (
+    "replace an earlier hdjax result at --out (never any other folder, an input or the current "
+    "directory)"
+)
+"""The `--overwrite` help of the commands that write a result folder."""
+
+
+def add_command(sub, name: str, help: str, example: str) -> argparse.ArgumentParser:
+    """The parser of subcommand `name`: its one-line `help` is also its description, and
+    `example` (the command's usage examples) its epilog."""
+    return sub.add_parser(name, help=help, description=help, epilog=example)
+
+
+def add_flag(p: argparse.ArgumentParser, name: str, help: str, *aliases: str) -> None:
+    """An on/off option `name` (and its `aliases`, e.g. `-q`), false unless given."""
+    p.add_argument(name, *aliases, action="store_true", help=help)
+
+
+def add_quiet(p: argparse.ArgumentParser, help: str = "no progress lines on stderr") -> None:
+    """`--quiet`/`-q`, which every command takes."""
+    add_flag(p, "--quiet", help, "-q")
+
+
+def add_experiment_command(
+    sub, name: str, help: str, example: str, *, config: str, out: str, flags: dict
+) -> argparse.ArgumentParser:
+    """The parser of a command that runs an experiment file (`run`, `sweep`): the file
+    (`config` its help), the command's on/off `flags` (option -> help), `--out` (`out` its
+    help), `--overwrite`, `--set`, `--force` and `--quiet`."""
+    p = add_command(sub, name, help, example)
+    p.add_argument("config", help=config)
+    for flag, flag_help in flags.items():
+        add_flag(p, flag, flag_help)
+    p.add_argument("--out", help=out)
+    add_flag(p, "--overwrite", RESULT_OVERWRITE)
     p.add_argument(
         "--set",
         metavar="KEY=VALUE",
@@ -98,13 +133,31 @@ def add_common(p: argparse.ArgumentParser) -> None:
         help="change one setting of the config, e.g. --set model.poly_order=4 (repeatable; "
         'values are TOML: 4, 1.5, true, [20, 20], "text")',
     )
-    p.add_argument(
+    add_flag(
+        p,
         "--force",
-        action="store_true",
-        help="run even when a recording's motor/output angle ratio differs from the joint's "
+        "run even when a recording's motor/output angle ratio differs from the joint's "
         "(refused by default: the calibration would be wrong)",
     )
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress lines on stderr")
+    add_quiet(p)
+    return p
+
+
+def resumable_result(out: Path, *, overwrite: bool, inputs: list, command: str):
+    """The result folder (a `hdjax.report.ResultDir`) `out` of a command whose finished
+    parts survive a failure: they are written to its staging folder `OUT.partial`, which an
+    error or an interrupt leaves in place (when it holds finished work) for the next run to
+    resume from."""
+    from ..report import ResultDir  # hdjax.report is heavy: imported on use
+
+    return ResultDir(
+        out,
+        overwrite=overwrite,
+        inputs=inputs,
+        staging=out.parent / f"{out.name}.partial",
+        keep_staging_on_error=True,
+        command=command,
+    )
 
 
 def experiment_inputs(exp) -> list:
@@ -112,6 +165,8 @@ def experiment_inputs(exp) -> list:
     names (train, test and any other file setting), for the output rules of
     [`hdjax.report.check_output_dir`][]."""
     from pathlib import Path
+
+    from ..config._dataset import resolve_path  # hdjax.config is heavy: imported on use
 
     paths = [exp.path] if getattr(exp, "path", None) is not None else []
 
@@ -141,6 +196,8 @@ def read_column_map(path):
     `columns`, `extras` and the CSV text `encoding`; other keys of the table are ignored, so an
     experiment config serves as a column map."""
     from pathlib import Path
+
+    from ..config import parse_toml  # hdjax.config is heavy: imported on use
 
     cpath = Path(path)
     if not cpath.exists():

@@ -8,7 +8,7 @@ from .._errors import ConfigError, DataError
 from .._formats import _check_exists, iter_recordings, reader
 from .._formats._parquet import ParquetWriter
 from ..report import check_output_file
-from ._common import Progress, read_column_map as read_column_map
+from ._common import Progress, add_command, add_flag, add_quiet, read_column_map as read_column_map
 
 HELP = "convert a log (CSV, .npz, HDF5, MATLAB v7.3, MCAP) to Parquet, chunk by chunk"
 EXAMPLE = """\
@@ -24,7 +24,7 @@ theta_l, current, torque and the mapped extras in SI units. The input is read in
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("convert", help=HELP, description=HELP, epilog=EXAMPLE)
+    p = add_command(sub, "convert", HELP, EXAMPLE)
     p.add_argument("input", help="the log to read (.csv, .npz, .parquet, .h5, .mat, .mcap)")
     p.add_argument("output", help="the Parquet file to write (.parquet)")
     p.add_argument(
@@ -32,8 +32,8 @@ def add_parser(sub) -> None:
         help="TOML file whose [data] table maps the log's columns (as in an experiment config)",
     )
     p.add_argument("--chunk", type=int, default=1 << 20, help="rows per chunk (default 1048576)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress lines on stderr")
+    add_flag(p, "--overwrite", "replace an existing output file")
+    add_quiet(p)
 
 
 def convert(src, dst, columns=None, *, chunk: int = 1 << 20, progress=None) -> int:

@@ -7,15 +7,15 @@ from pathlib import Path
 # compliance.estimate_torque is looked up at each call (a test stops the command there)
 from .. import compliance
 from .._errors import ConfigError, DataError, ModelMismatchError, UnitWarning
-from .._io import atomic_write_bytes, load_recording
+from .._io import atomic_write_bytes, csv_bytes, load_recording
 from .._joint import load_joint
+from .._memory import check_read_memory
 from .._metrics import error_metrics
 from ..config import check_compatible, load_model
-from ..config._preflight import check_read_memory
 from ..config._saved_model import angle_ratio_mismatch
 from ..network import predict_torque as net_estimate
 from ..report import check_output_file
-from ._common import Progress, read_column_map
+from ._common import Progress, add_command, add_flag, add_quiet, read_column_map
 
 HELP = "estimate torque on a new recording with a saved model (CSV in, CSV out)"
 EXAMPLE = """\
@@ -29,7 +29,7 @@ a reference torque, torque_measured is added and the RMS / maximum error go to s
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("estimate", help=HELP, description=HELP, epilog=EXAMPLE)
+    p = add_command(sub, "estimate", HELP, EXAMPLE)
     p.add_argument(
         "--model",
         required=True,
@@ -53,23 +53,21 @@ def add_parser(sub) -> None:
         help="TOML file with the data's [joint] table; refused if its ratio differs from the "
         "model's",
     )
-    p.add_argument(
+    add_flag(
+        p,
         "--overwrite",
-        action="store_true",
-        help="replace an estimate written earlier by hdjax at --out (never an input or another "
-        "file)",
+        "replace an estimate written earlier by hdjax at --out (never an input or another file)",
     )
-    p.add_argument(
+    add_flag(
+        p,
         "--force",
-        action="store_true",
-        help="estimate even when the angles look wrong for the model (degrees instead of "
-        "radians, or a motor/output angle ratio other than the model's); refused by default",
+        "estimate even when the angles look wrong for the model (degrees instead of radians, "
+        "or a motor/output angle ratio other than the model's); refused by default",
     )
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress lines on stderr")
+    add_quiet(p)
 
 
 def command(args, parser) -> int:
-    import io
     import warnings
 
     import numpy as np
@@ -134,18 +132,9 @@ def command(args, parser) -> int:
             f"error against the measured torque: RMS {m.rms:.4g} N·m, max {m.max:.4g} N·m "
             f"({m.max_pct:.3g} % of rated)"
         )
-    buf = io.StringIO()
-    names = list(cols)
-    np.savetxt(
-        buf,
-        np.column_stack([cols[k] for k in names]),
-        delimiter=",",
-        header=",".join(names),
-        comments="",
-        fmt="%.17g",
-    )
+    data = csv_bytes(cols)
     check_output_file(out, inputs=inputs, overwrite=args.overwrite, ours=is_estimate)
-    atomic_write_bytes(out, buf.getvalue().encode())
+    atomic_write_bytes(out, data)
     progress(f"wrote {out}")
     return 0
 

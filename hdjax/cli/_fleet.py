@@ -12,7 +12,8 @@ from .._errors import ConfigError
 from .._formats import require
 from .._lazy import dask_distributed
 from ..fleet import drift_figure, load_manifest, run_task, write_table
-from ..report import ResultDir, markdown_table, read_marker
+from ..report import markdown_table, read_marker
+from ._common import add_command, add_flag, add_quiet, resumable_result
 
 HELP = "run calibrate + discover (or estimate) on every joint-log of a manifest, on Dask"
 EXAMPLE = """\
@@ -42,21 +43,17 @@ WORKER_ENV = {
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("fleet", help=HELP, description=HELP, epilog=EXAMPLE)
+    p = add_command(sub, "fleet", HELP, EXAMPLE)
     p.add_argument("manifest", help="the fleet manifest (TOML: [fleet], [model], [[joints]])")
     p.add_argument("--out", required=True, help="the result folder")
     p.add_argument("--scheduler", help="address of a running Dask scheduler (default: local)")
     p.add_argument(
         "--workers", type=int, help="worker processes of the local cluster (default: one per core)"
     )
-    p.add_argument("--overwrite", action="store_true", help="replace an earlier fleet result")
-    p.add_argument("--fresh", action="store_true", help="rerun tasks that finished before")
-    p.add_argument(
-        "--no-pin",
-        action="store_true",
-        help="do not bind each worker of the local cluster to its own core",
-    )
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar on stderr")
+    add_flag(p, "--overwrite", "replace an earlier fleet result")
+    add_flag(p, "--fresh", "rerun tasks that finished before")
+    add_flag(p, "--no-pin", "do not bind each worker of the local cluster to its own core")
+    add_quiet(p, "no progress bar on stderr")
 
 
 class ProgressBar:
@@ -165,17 +162,9 @@ def command(args, parser) -> int:
     out = Path(args.out)
     inputs = [man.path] + [Path(t.log) for t in man.tasks]
     inputs += [Path(j["model"]) for j in man.joints.values() if j["model"]]
-    staging = out.parent / f"{out.name}.partial"
-    rd = ResultDir(
-        out,
-        overwrite=args.overwrite,
-        inputs=inputs,
-        staging=staging,
-        keep_staging_on_error=True,
-        command="fleet",
-    )
+    rd = resumable_result(out, overwrite=args.overwrite, inputs=inputs, command="fleet")
     try:
-        ordered = _collect(args, man, out, staging, rd, run_task, write_table, read_marker, jax)
+        ordered = _collect(args, man, out, rd.staging, rd, run_task, write_table, read_marker, jax)
     except BaseException:
         rd.abort()  # keeps the finished tasks in OUT.partial for the next run
         raise

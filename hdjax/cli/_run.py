@@ -21,7 +21,7 @@ from ..config._preflight import check_angles
 from ..network import predict_torque as net_estimate
 from ..pipelines import _paper as P
 from ..report import ResultDir, environment, error_rate_figure, markdown_table, torque_figure
-from ._common import Progress, add_common, experiment_inputs, parse_overrides
+from ._common import Progress, add_experiment_command, experiment_inputs, parse_overrides
 
 HELP = "run an experiment config: calibrate, estimate, score, write figures and a report"
 EXAMPLE = """\
@@ -35,22 +35,19 @@ OUT/model.json (the calibrated model, for 'hdjax estimate'); OUT appears only wh
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("run", help=HELP, description=HELP, epilog=EXAMPLE)
-    p.add_argument("config", help="experiment file (TOML), e.g. experiments/song2019.toml")
-    p.add_argument(
-        "--out",
-        help="result directory (default runs/NAME with NAME from [experiment] name); refused if "
+    add_experiment_command(
+        sub,
+        "run",
+        HELP,
+        EXAMPLE,
+        config="experiment file (TOML), e.g. experiments/song2019.toml",
+        out="result directory (default runs/NAME with NAME from [experiment] name); refused if "
         "it exists, unless --overwrite",
+        flags={
+            "--no-figures": "skip the figures (faster)",
+            "--no-network": "skip the network method",
+        },
     )
-    p.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="replace an earlier hdjax result at --out (never any other folder, an input or the "
-        "current directory)",
-    )
-    p.add_argument("--no-figures", action="store_true", help="skip the figures (faster)")
-    p.add_argument("--no-network", action="store_true", help="skip the network method")
-    add_common(p)
 
 
 def command(args, parser) -> int:

@@ -25,8 +25,14 @@ from ..config._preflight import check_angles
 from ..pipelines import _paper as P
 from ..pipelines._streamed import StreamedEstimate
 from ..reference import describe_column_reference
-from ..report import ResultDir, environment, find_knee, markdown_table, sweep_figure
-from ._common import Progress, add_common, experiment_inputs, parse_overrides
+from ..report import environment, find_knee, markdown_table, sweep_figure
+from ._common import (
+    Progress,
+    add_experiment_command,
+    experiment_inputs,
+    parse_overrides,
+    resumable_result,
+)
 
 HELP = "sweep one setting (e.g. the polynomial order 1-8): held-out error and time, knee marked"
 EXAMPLE = """\
@@ -47,27 +53,21 @@ NESTED = ("model.poly_order", "model.fourier_order")
 
 
 def add_parser(sub) -> None:
-    p = sub.add_parser("sweep", help=HELP, description=HELP, epilog=EXAMPLE)
-    p.add_argument("config", help="experiment file (TOML); its [sweep] table gives the defaults")
+    p = add_experiment_command(
+        sub,
+        "sweep",
+        HELP,
+        EXAMPLE,
+        config="experiment file (TOML); its [sweep] table gives the defaults",
+        out="result directory (default runs/NAME-sweep-SETTING)",
+        flags={"--fresh": "ignore member results cached by an earlier, interrupted run"},
+    )
     p.add_argument("--setting", help="the dotted setting to vary (default: [sweep] setting)")
     p.add_argument(
         "--values",
         help="values: a list '1,2,4', an integer range 'A:B' (inclusive) or a TOML list "
         "'[[10], [10, 10]]' (default: [sweep] values)",
     )
-    p.add_argument("--out", help="result directory (default runs/NAME-sweep-SETTING)")
-    p.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="replace an earlier hdjax result at --out (never any other folder, an input or the "
-        "current directory)",
-    )
-    p.add_argument(
-        "--fresh",
-        action="store_true",
-        help="ignore member results cached by an earlier, interrupted run",
-    )
-    add_common(p)
 
 
 def parse_values(text: str) -> list:
@@ -138,20 +138,12 @@ def run_sweep(
         raise ConfigError(f"sweep values repeat: {values}")
     for v, c in zip(values, cfgs):  # every member is checked before the first one runs
         preflight(c, base_dir=exp.base_dir, where=f"sweep member {setting} = {v!r}")
-    staging = out.parent / f"{out.name}.partial"
     inputs = experiment_inputs(exp)
     for c in cfgs:
         inputs += experiment_inputs(_with_path(c, exp))
-    rd = ResultDir(
-        out,
-        overwrite=overwrite,
-        inputs=inputs,
-        staging=staging,
-        keep_staging_on_error=True,
-        command="sweep",
-    )
+    rd = resumable_result(out, overwrite=overwrite, inputs=inputs, command="sweep")
     try:
-        summary_rows = _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force)
+        summary_rows = _sweep_into(rd, exp, setting, values, cfgs, progress, fresh, force)
     except BaseException:
         rd.abort()  # keeps finished members for resuming; an empty staging folder goes
         raise
@@ -159,8 +151,10 @@ def run_sweep(
     return summary_rows
 
 
-def _sweep_into(rd, exp, setting, values, cfgs, staging, progress, fresh, force):
+def _sweep_into(rd, exp, setting, values, cfgs, progress, fresh, force):
     import numpy as np
+
+    staging = rd.staging
 
     fp = _fingerprint(dict(exp), setting)
     cached: dict[int, dict] = {}

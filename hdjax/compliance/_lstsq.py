@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax
@@ -293,34 +294,64 @@ def calibrate_lstsq(model: ComplianceModel, data, *, throw: bool = True) -> Solu
     fast = _csne(design, b, g, atb, active)
     if fast is not None:
         coef, cond = fast
-        rank, collinear = p, ()
+        solved = (coef, p, cond, ())
     else:
-        coef, rank, cond, collinear = _qr_solve(model, sig, torque, active, throw)
-    resid, _ = design.residual_and_atr(b, coef)
+        solved = _qr_solve(model, sig, torque, active, throw)
+    resid, _ = design.residual_and_atr(b, solved[0])
     del design
     calibrated = [s_ for s_ in range(model.n_segments) if active[s_]]
     t_in = t_np[np.isin(np.searchsorted(np.asarray(model.knots), t_np, side="right"), calibrated)]
     torque_range = (float(t_in.min()), float(t_in.max())) if t_in.size else model.torque_range
-    fitted, invertible = fitted_model(model, coef, active, torque_range, dropped, throw)
     return calibration_solution(
-        fitted,
-        invertible,
-        rank=rank,
-        n_terms=p,
-        condition=cond,
+        model,
+        solved,
+        active,
+        torque_range,
+        throw=throw,
         residual_rms=float(np.sqrt(np.mean(resid**2))),
         n_samples=n,
         segment_counts=counts,
         dropped=dropped,
-        collinear=collinear,
-        fit_time_s=time.perf_counter() - t0,
+        t0=t0,
     )
 
 
-def calibration_solution(fitted: ComplianceModel, invertible: RESULTS, **stats) -> Solution:
-    """The [`hdjax.Solution`][] of a calibration: a rank-deficient design first, then a
-    non-invertible compliance (`invertible`, from [`fitted_model`][]), else success."""
-    result = RESULTS.rank_deficient if stats["rank"] < stats["n_terms"] else invertible
+def calibration_solution(
+    model: ComplianceModel,
+    solved: tuple,
+    active,
+    torque_range: tuple[float, float],
+    *,
+    throw: bool,
+    residual_rms: float,
+    n_samples: int,
+    segment_counts,
+    dropped: Sequence[str],
+    t0: float,
+) -> Solution:
+    """The [`hdjax.Solution`][] of a calibration of `model`, batch or streamed.
+
+    Its value is `model` with the solved coefficients, its `active` terms and the calibrated
+    `torque_range` ([`fitted_model`][]); its result a rank-deficient design first, then a
+    non-invertible compliance, else success; its stats those of the module docstring.
+    `solved` is the solve's `(coef, rank, condition, collinear)`, `t0` the
+    `time.perf_counter()` the fit started at.
+    """
+    coef, rank, condition, collinear = solved
+    n_terms = int(np.sum(active))
+    fitted, invertible = fitted_model(model, coef, active, torque_range, dropped, throw)
+    result = RESULTS.rank_deficient if rank < n_terms else invertible
+    stats = {
+        "rank": rank,
+        "n_terms": n_terms,
+        "condition": condition,
+        "residual_rms": residual_rms,
+        "n_samples": n_samples,
+        "segment_counts": segment_counts,
+        "dropped": dropped,
+        "collinear": collinear,
+        "fit_time_s": time.perf_counter() - t0,
+    }
     return Solution(fitted, result, stats)
 
 
@@ -416,7 +447,7 @@ def fitted_model(model, coef, active, torque_range, dropped, throw):
     if dropped:
         warnings.warn(
             "calibration left out terms the data cannot reach: " + "; ".join(dropped),
-            stacklevel=3,  # the caller of calibrate_lstsq / calibrate_stream
+            stacklevel=4,  # the caller of calibrate_lstsq / calibrate_stream
         )
     return fitted, invertible
 

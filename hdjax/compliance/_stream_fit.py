@@ -34,7 +34,6 @@ from ._lstsq import (
     _compact_index,
     calibration_solution,
     check_sample_count,
-    fitted_model,
     select_active_counts,
     solve_from_r,
 )
@@ -369,17 +368,15 @@ def calibrate_stream(
         torque_range = (float(t_lo[calibrated].min()), float(t_hi[calibrated].max()))
     else:
         torque_range = model.torque_range
-    fitted, invertible = fitted_model(model, coef, active, torque_range, dropped, throw)
     return calibration_solution(
-        fitted,
-        invertible,
-        rank=rank,
-        n_terms=n_act,
-        condition=cond,
+        model,
+        (coef, rank, cond, collinear),
+        active,
+        torque_range,
+        throw=throw,
         residual_rms=float(np.sqrt(max(rss, 0.0) / n)),
         n_samples=n,
         segment_counts=counts_t,
         dropped=dropped,
-        collinear=collinear,
-        fit_time_s=time.perf_counter() - t0,
+        t0=t0,
     )

@@ -18,7 +18,9 @@ loop's designs it agrees with the per-fold QR of [`hdjax.discover._select.cv_gai
 about $10^{-9}$ (a test), far below any decision threshold.
 
 Memory: the statistics take `n_blocks x (p + 1) x (p + 1 + c)` numbers; the pass reads the
-samples in chunks of whole blocks of at most `chunk` rows, so no copy of the data is made.
+samples in chunks of whole blocks of at most `chunk` rows, so no copy of the data is made, and
+the candidates' columns may arrive batch by batch ([`block_statistics_batched`][]), so the
+library's columns need never be in memory all at once.
 """
 
 from __future__ import annotations
@@ -68,24 +70,22 @@ def block_statistics(a, groups, y, blocks, *, chunk: int = CHUNK) -> BlockStatis
     `blocks` is the block index per sample (contiguous blocks in sample order, as
     [`hdjax.discover._folds.contiguous_blocks`][] makes them).
     """
+    return block_statistics_batched(a, [groups], y, blocks, chunk=chunk)
+
+
+def block_statistics_batched(a, batches, y, blocks, *, chunk: int = CHUNK) -> BlockStatistics:
+    """[`block_statistics`][] of candidate groups that arrive batch by batch: `batches` is an
+    iterable of lists of `(n, w)` arrays (a generator may compute each batch when asked), so
+    only one batch's columns need be in memory. The groups are numbered in arrival order; the
+    statistics equal those of all groups at once (each group's are its own: the base's
+    projection and the per-block products of its columns).
+    """
     a = np.asarray(a, np.float64)
     y = np.asarray(y, np.float64)
     blocks = np.asarray(blocks)
     bounds = _block_bounds(blocks)
     n_blocks = bounds.size - 1
     p = a.shape[1]
-    widths = tuple(int(g.shape[1]) for g in groups)
-    offsets = np.cumsum((0,) + widths)
-    c_total = int(offsets[-1])
-    by_width: dict[int, list[int]] = {}
-    for i, w in enumerate(widths):
-        by_width.setdefault(w, []).append(i)
-    cols = {
-        w: np.array([np.arange(offsets[i], offsets[i] + w) for i in idx])
-        for w, idx in by_width.items()
-    }
-    ab = np.zeros((n_blocks, p + 1, p + 1 + c_total))
-    cc = {w: np.zeros((n_blocks, len(idx), w, w)) for w, idx in by_width.items()}
     chunks = []
     b = 0
     while b < n_blocks:
@@ -96,46 +96,113 @@ def block_statistics(a, groups, y, blocks, *, chunk: int = CHUNK) -> BlockStatis
         chunks.append((b, e))
         b = e
 
-    def stacked(lo, hi):
-        m = np.empty((hi - lo, p + 1 + c_total))
-        m[:, :p] = a[lo:hi]
-        m[:, p] = y[lo:hi]
-        for i, g in enumerate(groups):
-            m[:, p + 1 + offsets[i] : p + 1 + offsets[i + 1]] = g[lo:hi]
-        return m
-
-    # Pre-pass: A^T [y | C] over the record, to make y and the candidates (nearly) orthogonal
-    # to the base design before the statistics are summed. A refit on [A | C] equals one on
-    # [A | C - A W] for any W (the same column space), so the scores are unchanged, but a
-    # candidate close to the base's span no longer loses its digits to the cancellation in
+    # Pre-pass: A^T A and A^T y, to make y and the candidates (nearly) orthogonal to the base
+    # design before the statistics are summed. A refit on [A | C] equals one on [A | C - A W]
+    # for any W (the same column space), so the scores are unchanged, but a candidate close to
+    # the base's span no longer loses its digits to the cancellation in
     # C^T C - C^T A (A^T A)^{-1} A^T C.
-    proj = np.zeros((p, 1 + c_total))
     if p:
         aa = np.zeros((p, p))
-        ar = np.zeros((p, 1 + c_total))
+        ay = np.zeros(p)
         for b, e in chunks:
-            m = stacked(bounds[b], bounds[e])
-            aa += m[:, :p].T @ m[:, :p]
-            ar += m[:, :p].T @ m[:, p:]
+            ac = a[bounds[b] : bounds[e]]
+            aa += ac.T @ ac
+            ay += ac.T @ y[bounds[b] : bounds[e]]
         d = np.sqrt(np.diag(aa))
         d[d == 0] = 1.0
-        proj = np.linalg.lstsq(aa / np.outer(d, d), ar / d[:, None], rcond=1e-13)[0] / d[:, None]
+        aa_scaled = aa / np.outer(d, d)
+
+        def project(ar):
+            return np.linalg.lstsq(aa_scaled, ar / d[:, None], rcond=1e-13)[0] / d[:, None]
+
+        yt = y - a @ project(ay[:, None])[:, 0]
+    else:
+        yt = y.copy()
+    # the base's own products, [A | y]^T [A | y] per block
+    base = np.zeros((n_blocks, p + 1, p + 1))
+    for j in range(n_blocks):
+        rows = slice(bounds[j], bounds[j + 1])
+        ab_ = a[rows]
+        yb = yt[rows]
+        base[j, :p, :p] = ab_.T @ ab_
+        base[j, :p, p] = base[j, p, :p] = ab_.T @ yb
+        base[j, p, p] = yb @ yb
+    parts, widths = [base], []
+    cc_parts: dict[int, list] = {}
+    for batch in batches:
+        part, cc_b = _batch_statistics(a, yt, list(batch), bounds, chunks, project if p else None)
+        if part is None:
+            continue
+        parts.append(part)
+        for g in batch:
+            w = int(g.shape[1])
+            widths.append(w)
+        for w, v in cc_b.items():
+            cc_parts.setdefault(w, []).append(v)
+    widths = tuple(widths)
+    offsets = np.cumsum((0,) + widths)
+    by_width: dict[int, list[int]] = {}
+    for i, w in enumerate(widths):
+        by_width.setdefault(w, []).append(i)
+    cols = {
+        w: np.array([np.arange(offsets[i], offsets[i] + w) for i in idx])
+        for w, idx in by_width.items()
+    }
+    cc = {w: np.concatenate(cc_parts[w], axis=1) for w in by_width}
+    ab = np.concatenate(parts, axis=2)
+    return BlockStatistics(
+        ab, cc, {w: np.asarray(idx) for w, idx in by_width.items()}, cols, p, len(widths), widths
+    )
+
+
+def _batch_statistics(a, yt, groups, bounds, chunks, project):
+    """`[A | y]^T C` per block and each group's own `C_i^T C_i` per block, for one batch of
+    groups, the columns made orthogonal to the base first (`project`: `A^T C -> W`).
+    **Returns:** `(ab part (n_blocks, p + 1, c), {w: (n_blocks, g_w, w, w)})`, or `(None, {})`
+    for an empty batch."""
+    if not groups:
+        return None, {}
+    n_blocks = bounds.size - 1
+    p = a.shape[1]
+    widths = [int(g.shape[1]) for g in groups]
+    offsets = np.cumsum([0] + widths)
+    c_total = int(offsets[-1])
+    by_width: dict[int, list[int]] = {}
+    for i, w in enumerate(widths):
+        by_width.setdefault(w, []).append(i)
+    cols = {
+        w: np.array([np.arange(offsets[i], offsets[i] + w) for i in idx])
+        for w, idx in by_width.items()
+    }
+
+    def stacked(lo, hi):
+        m = np.empty((hi - lo, c_total))
+        for i, g in enumerate(groups):
+            m[:, offsets[i] : offsets[i + 1]] = g[lo:hi]
+        return m
+
+    proj = None
+    if project is not None:
+        ar = np.empty((p, c_total))
+        for i, g in enumerate(groups):
+            ar[:, offsets[i] : offsets[i + 1]] = a.T @ g
+        proj = project(ar)
+    ab = np.zeros((n_blocks, p + 1, c_total))
+    cc = {w: np.zeros((n_blocks, len(idx), w, w)) for w, idx in by_width.items()}
     for b, e in chunks:
         lo, hi = bounds[b], bounds[e]
         m = stacked(lo, hi)
-        if p:
-            m[:, p:] -= m[:, :p] @ proj
+        if proj is not None:
+            m -= a[lo:hi] @ proj
         for j in range(b, e):
             rows = slice(bounds[j] - lo, bounds[j + 1] - lo)
-            mb = m[rows]
-            ab[j] = mb[:, : p + 1].T @ mb
-            cb = mb[:, p + 1 :]
+            cb = m[rows]
+            ab[j, :p] = a[bounds[j] : bounds[j + 1]].T @ cb
+            ab[j, p] = yt[bounds[j] : bounds[j + 1]] @ cb
             for w, ci in cols.items():
                 x = cb[:, ci]  # (rows, g_w, w)
                 cc[w][j] = np.einsum("nga,ngb->gab", x, x)
-    return BlockStatistics(
-        ab, cc, {w: np.asarray(idx) for w, idx in by_width.items()}, cols, p, len(groups), widths
-    )
+    return ab, cc
 
 
 def _chol_solve(g: np.ndarray, rhs: np.ndarray) -> np.ndarray:

@@ -48,7 +48,7 @@ from ._folds import (
     cv_block_length,
     fold_assignment,
 )
-from ._gram import block_statistics, fold_gains
+from ._gram import block_statistics_batched, fold_gains
 from ._library import LibraryOptions, build_library, candidate_columns
 from ._pipeline import (
     PipelineData,
@@ -61,6 +61,7 @@ from ._pipeline import (
     quiet_calibrate,
 )
 from ._select import (
+    MAX_SINDY_ROWS,
     block_grams,
     cv_gains,
     cv_gains_by_blocks,
@@ -268,6 +269,70 @@ def _fold_of_block(blocks: np.ndarray, folds) -> np.ndarray:
     return out
 
 
+BATCH_COLUMNS = 16
+"""Candidate columns computed and summed into the block statistics at once (memory: this
+many columns of the record, not the whole library's)."""
+
+
+def _usable(c: np.ndarray) -> bool:
+    """A candidate whose columns are finite and not constant can be scored.
+
+    Column by column (a reduction along the first axis of an `(n, 2)` array is several times
+    slower); a column is finite exactly when its minimum and maximum are."""
+    varies = False
+    for j in range(c.shape[1]):
+        lo, hi = c[:, j].min(), c[:, j].max()
+        if not (np.isfinite(lo) and np.isfinite(hi)):
+            return False
+        varies = varies or bool(hi > lo)
+    return varies
+
+
+def _streamed_scores(cands, sig, torque, a, y, resid, blocks, options, phase):
+    """Block statistics of the candidates' columns, computed `BATCH_COLUMNS` columns at a
+    time, and the sparse regression on every `step`-th sample of them (the rows
+    [`sindy_select`][hdjax.discover._select.sindy_select] reads).
+
+    **Returns:** `(sindy-selected per column, owner candidate per column, usable candidate
+    indices, BlockStatistics of the usable candidates)`.
+    """
+    n = a.shape[0]
+    step = max(1, n // MAX_SINDY_ROWS)
+    thin: list[np.ndarray] = []
+    owner: list[int] = []
+    usable: list[int] = []
+
+    def batches():
+        batch, width = [], 0
+        for i, cand in enumerate(cands):
+            c = candidate_columns(cand.term, sig, torque)
+            for j in range(c.shape[1]):
+                thin.append(np.ascontiguousarray(c[::step, j]))
+                owner.append(i)
+            if _usable(c):
+                usable.append(i)
+                batch.append(c)
+                width += c.shape[1]
+            if width >= BATCH_COLUMNS:
+                yield batch
+                batch, width = [], 0
+        if batch:
+            yield batch
+
+    with phase("twist CV"):  # the candidates' columns included
+        stats = block_statistics_batched(a, batches(), y, blocks)
+    with phase("sindy"):
+        # every `step`-th row, as `sindy_select` takes them (it keeps these rows whole)
+        selected = sindy_select(
+            a[::step],
+            resid[::step],
+            thin,
+            [str(o) for o in owner],
+            threshold=options.sindy_threshold,
+        )
+    return selected, np.asarray(owner), usable, stats
+
+
 def score_candidates(
     model,
     train,
@@ -295,7 +360,7 @@ def score_candidates(
         sig, torque = training_data(model, data, est)
         a_full = design(model, sig, torque)
         active = np.asarray(model.active)
-        a = a_full[:, active]
+        a = a_full if active.all() else a_full[:, active]
         y = np.asarray(sig.twist)
         resid = y - a_full @ np.asarray(model.coef)
         del a_full
@@ -314,28 +379,30 @@ def score_candidates(
         )
         if not cands:
             return [], spectra, resid
-        cols = [candidate_columns(c.term, sig, torque) for c in cands]
-    with phase("sindy"):
-        flat_cols, owner = [], []
-        for i, c in enumerate(cols):
-            for j in range(c.shape[1]):
-                flat_cols.append(c[:, j])
-                owner.append(i)
-        selected = sindy_select(
-            a, resid, flat_cols, [str(o) for o in owner], threshold=options.sindy_threshold
+    if blocks is not None and folds is not None:
+        selected, owner, usable, stats = _streamed_scores(
+            cands, sig, torque, a, y, resid, blocks, options, phase
         )
-        owner = np.asarray(owner)
-    with phase("twist CV"):
-        usable = [
-            i for i, c in enumerate(cols) if np.isfinite(c).all() and np.ptp(c, axis=0).max() > 0
-        ]
-        groups = [cols[i] for i in usable]
-        if blocks is not None and folds is not None:
-            stats = block_statistics(a, groups, y, blocks)
+        with phase("twist CV"):
             total, per_fold = fold_gains(stats, _fold_of_block(blocks, folds), options.n_folds)
             gains = list(zip(total.tolist(), per_fold))
             resampled = [fold_gains(stats, fb, options.n_folds)[0] for fb in resamples]
-        else:
+    else:
+        with phase("library"):
+            cols = [candidate_columns(c.term, sig, torque) for c in cands]
+        with phase("sindy"):
+            flat_cols, owner = [], []
+            for i, c in enumerate(cols):
+                for j in range(c.shape[1]):
+                    flat_cols.append(c[:, j])
+                    owner.append(i)
+            selected = sindy_select(
+                a, resid, flat_cols, [str(o) for o in owner], threshold=options.sindy_threshold
+            )
+            owner = np.asarray(owner)
+        with phase("twist CV"):
+            usable = [i for i, c in enumerate(cols) if _usable(c)]
+            groups = [cols[i] for i in usable]
             basis = fold_basis(a, y, options.n_folds, options.block, tests=folds)
             gains = cv_gains(basis, groups)
             if len(resamples):

@@ -12,10 +12,11 @@ import numpy as np
 
 from .. import effects
 from .._features import find_gaps
-from .._plotting import pyplot
+from .._plotting import fixed_margins, pyplot
 from .._solution import Solution
 from ..compliance._lstsq import prepare
 from ._loop import ARCSEC, DiscoveryRecord, residual_spectra
+from ._pipeline import design
 
 STOPPING_RULE = (
     "a candidate is eligible when pysindy STLSQ selects it and it removes at least min_gain of "
@@ -92,7 +93,7 @@ def _plot_spectra(spectra, chosen, title, path):
         ax.set_ylabel("explained variance [%]")
         ax.legend(loc="upper right", fontsize=8) if ax.get_legend_handles_labels()[0] else None
     axes[0].set_title(title)
-    fig.tight_layout()
+    fixed_margins(fig)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -101,7 +102,8 @@ def _plot_residual_vs_angle(model, data, title, path):
     plt = pyplot()
 
     sig, torque = prepare(model, data)
-    r = (np.asarray(sig.twist) - np.asarray(model.predict_twist(sig, torque))) * ARCSEC
+    # the design compiled once per structure (op by op it dispatches hundreds of small programs)
+    r = (np.asarray(sig.twist) - design(model, sig, torque) @ np.asarray(model.coef)) * ARCSEC
     idx = np.linspace(0, r.size - 1, min(r.size, 6000)).astype(int)
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
     for ax, name in zip(axes, ("theta_m", "theta_l")):
@@ -110,7 +112,7 @@ def _plot_residual_vs_angle(model, data, title, path):
         ax.set_xlabel(f"{name} mod 2π [rad]")
         ax.set_ylabel("twist residual [arcsec]")
     axes[0].set_title(title)
-    fig.tight_layout()
+    fixed_margins(fig)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -144,7 +146,7 @@ def _plot_torque(result: DiscoveryRecord, path):
     axes[1].set_xlabel("time [s]")
     axes[1].legend(fontsize=8)
     axes[0].set_title("TEST: estimated against measured torque, before and after")
-    fig.tight_layout()
+    fixed_margins(fig, hspace=0.15)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -162,7 +164,7 @@ def _plot_progress(result: DiscoveryRecord, path):
     ax.set_xticks(x, labels, rotation=15, fontsize=8)
     ax.set_ylabel("TEST torque error [N·m]")
     ax.legend()
-    fig.tight_layout()
+    fixed_margins(fig, bottom=0.75, top=0.15)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 

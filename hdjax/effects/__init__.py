@@ -17,6 +17,7 @@ from ._base import (
     SEGMENT_START as SEGMENT_START,
     TORQUE_KINDS as TORQUE_KINDS,
     TORQUE_PATH as TORQUE_PATH,
+    AbstractColumnListTerm as AbstractColumnListTerm,
     AbstractFamily as AbstractFamily,
     AbstractFriction as AbstractFriction,
     AbstractHysteresis as AbstractHysteresis,
@@ -30,9 +31,6 @@ from ._base import (
     Candidate as Candidate,
     CandidateContext as CandidateContext,
     PlantEffect as PlantEffect,
-    f64 as f64,
-    fmt as fmt,
-    require as require,
 )
 from ._coulomb import (
     Coulomb as Coulomb,
@@ -40,6 +38,14 @@ from ._coulomb import (
     CoulombFriction as CoulombFriction,
 )
 from ._damping import DampingFamily as DampingFamily, TwistRate as TwistRate
+from ._fields import (
+    bound as bound,
+    f64 as f64,
+    fmt as fmt,
+    hyper as hyper,
+    labels as labels,
+    require as require,
+)
 from ._hysteresis import (
     BoucWen as BoucWen,
     Dahl as Dahl,

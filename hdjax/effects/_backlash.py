@@ -16,44 +16,26 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, Float
-from ._base import (
-    AbstractFamily,
-    AbstractMemorylessTerm,
-    AbstractPlantEffect,
-    Candidate,
-    PlantEffect,
-    check_positive,
-    f64,
-    fmt,
-    require,
-)
+from .._custom_types import Array, Float, Pointwise, PointwiseOut
+from ._base import AbstractFamily, AbstractMemorylessTerm, AbstractPlantEffect, Candidate
+from ._fields import bound, hyper, labels
 
 
 class Backlash(AbstractMemorylessTerm):
     """Lost motion around zero torque: a smooth step $\\tanh(T/T_b)$ of width $T_b$."""
 
-    width: float = eqx.field(default=1.0, static=True)
+    width: float = hyper(1.0, positive=True)
 
-    def __check_init__(self):
-        check_positive("Backlash", "width", self.width)
+    key, names = labels("backlash:torque", "tanh(T/{width})")
 
-    @property
-    def key(self) -> str:
-        return "backlash:torque"
-
-    def names(self) -> tuple[str, ...]:
-        return (f"tanh(T/{fmt(self.width)})",)
-
-    def value_and_slope(self, torque):
+    def value_and_slope(self, torque: Pointwise) -> tuple[PointwiseOut, PointwiseOut]:
         v = jnp.tanh(torque / self.width)
         return v, (1.0 - v**2) / self.width
 
-    def numpy_value(self, torque) -> np.ndarray:
+    def numpy_value(self, torque: Pointwise) -> Float[np.ndarray, "*shape"]:
         return np.tanh(np.asarray(torque) / self.width)
 
 
@@ -64,53 +46,40 @@ class LostMotion(AbstractPlantEffect):
     play closes (catalogues measure lost motion at $\pm 4\%$ of rated torque).
     """
 
-    width: Float[Array, ""]
-    torque_scale: Float[Array, ""]
+    width: Float[Array, ""] = bound("nonneg")
+    torque_scale: Float[Array, ""] = bound("positive", inverse=True)
 
-    def reciprocals(self):
-        return {"torque_scale": 1.0 / self.torque_scale}
-
-    def deflection(self, torque, inv=None):
+    def deflection(self, torque: Pointwise, inv: dict | None = None) -> PointwiseOut:
         inv = self.reciprocals() if inv is None else inv
         return 0.5 * self.width * jnp.tanh(torque * inv["torque_scale"])
 
-    def slope(self, torque, inv=None):
+    def slope(self, torque: Pointwise, inv: dict | None = None) -> PointwiseOut:
         inv = self.reciprocals() if inv is None else inv
         th = jnp.tanh(torque * inv["torque_scale"])
         return 0.5 * self.width * (1.0 - th * th) * inv["torque_scale"]
 
 
-def _build(name: str, p: dict) -> LostMotion:
-    require(name, "width", p["width"], nonneg=True, shape=())
-    require(name, "torque_scale", p["torque_scale"], positive=True, shape=())
-    return LostMotion(f64(p["width"]), f64(p["torque_scale"]))
-
-
 _ARCMIN = np.pi / (180.0 * 60.0)
 
 
+def _defaults(rated: float, k1: float, given) -> dict:
+    """1 arcmin of lost motion (a size 40-50 unit's catalogue value), closing over 2 % of the
+    rated torque."""
+    return dict(width=1.0 * _ARCMIN, torque_scale=0.02 * rated)
+
+
 class BacklashFamily(AbstractFamily):
-    """Lost motion: plant `backlash`; term `Backlash`; a grid of widths $T_b$."""
+    """Lost motion: plant `backlash`; term `Backlash`; a grid of widths $T_b$, fractions of the
+    rated torque."""
 
     name: ClassVar[str] = "backlash"
     terms: ClassVar[tuple] = (Backlash,)
-    plant_effects: ClassVar[tuple] = (
-        PlantEffect(
-            "backlash",
-            "compliance",
-            lambda rated, k1, given: dict(width=1.0 * _ARCMIN, torque_scale=0.02 * rated),
-            _build,
-        ),
-    )
+    plant_effects: ClassVar[tuple] = (LostMotion.entry("backlash", "compliance", _defaults),)
     discover_families: ClassVar[tuple] = ("backlash:torque",)
-    vocabulary: ClassVar[str] = "backlash:torque"
     options: ClassVar[dict] = {"backlash_fractions": (0.005, 0.01, 0.02, 0.05)}
 
     def candidates(self, ctx):
         if not ctx.wants("backlash:torque"):
             return []
-        out = []
-        for frac in ctx.option(self, "backlash_fractions"):
-            term = Backlash(width=frac * ctx.rated_torque)
-            out.append(Candidate(term.key, term.key, term))
-        return out
+        fractions = ctx.option(self, "backlash_fractions")
+        return [Candidate.of(Backlash(width=f * ctx.rated_torque)) for f in fractions]

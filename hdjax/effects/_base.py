@@ -21,15 +21,30 @@ from __future__ import annotations
 
 import abc
 import dataclasses
-import math
+import functools
+import typing
 from collections.abc import Callable, Mapping
+from types import ModuleType
 from typing import Any, ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._custom_types import (
+    Array,
+    ArrayLike,
+    Design,
+    Float,
+    NumpyDesign,
+    Pointwise,
+    PointwiseOut,
+    Samples,
+    SamplesLike,
+)
 from .._errors import ConfigError
+from .._features import Signals
+from ._fields import check_positive, f64, require, vector
 
 TORQUE_KINDS = ("none", "linear", "memoryless", "path")
 """How a term depends on the torque $T$ (see [`hdjax.effects.AbstractTerm`][])."""
@@ -73,22 +88,6 @@ PLANT_SLOTS = (
 """
 
 
-def fmt(x: float) -> str:
-    """A number as a short decimal string (`2`, `1.98`, `0.5`) for column names and keys."""
-    return f"{x:.10g}"
-
-
-def is_finite_number(x) -> bool:
-    """Whether `x` is a plain finite Python number (not a bool, not a tracer)."""
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-
-
-def check_positive(owner: str, field: str, value) -> None:
-    """Raise `ConfigError` when a plain-number hyperparameter is not finite and positive."""
-    if isinstance(value, (int, float)) and not (math.isfinite(value) and value > 0):
-        raise ConfigError(f"{owner}: {field} must be finite and positive, got {value!r}")
-
-
 # ---------------------------------------------------------------------------------------------
 # Regression terms
 # ---------------------------------------------------------------------------------------------
@@ -113,7 +112,9 @@ class AbstractTerm(eqx.Module):
     **Subclasses implement:** `key` (the vocabulary key), `names()` (one name per column),
     `columns(sig, torque)` (JAX, shape `(n, len(names))`) and `numpy_columns(sig, torque)` (the
     same in NumPy: the reference the tests compare with, and what the residual loop scores
-    with when `score_in_numpy`).
+    with when `score_in_numpy`). `key` and `names` are often templates over the fields
+    ([`labels`][]); a hyperparameter declared with
+    `hyper(..., positive=True)` is checked here, at construction.
     """
 
     torque_kind: eqx.AbstractClassVar[str]
@@ -125,6 +126,9 @@ class AbstractTerm(eqx.Module):
                 f"term {type(self).__name__} has torque_kind {self.torque_kind!r}; "
                 f"expected one of {TORQUE_KINDS}"
             )
+        for f in dataclasses.fields(self):
+            if f.metadata.get("positive"):
+                check_positive(type(self).__name__, f.name, getattr(self, f.name))
 
     @property
     @abc.abstractmethod
@@ -136,11 +140,11 @@ class AbstractTerm(eqx.Module):
         """One name per column."""
 
     @abc.abstractmethod
-    def columns(self, sig, torque=None):
+    def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Design:
         """The columns, shape `(n_samples, len(names()))`."""
 
     @abc.abstractmethod
-    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+    def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         """The columns computed in NumPy (the reference for `columns`)."""
 
 
@@ -150,25 +154,36 @@ class AbstractTorqueFreeTerm(AbstractTerm):
     torque_kind: ClassVar[str] = "none"
 
 
+class AbstractColumnListTerm(AbstractTorqueFreeTerm):
+    """A torque-free group computed column by column: subclasses implement `column_list(sig)`,
+    one 1-D array per column (the compliance model's base design takes the list as it is, so
+    XLA fuses the columns without stacking them), and `numpy_columns`."""
+
+    @abc.abstractmethod
+    def column_list(self, sig: Signals) -> list[Float[Array, " n"]]:
+        """The columns as separate arrays, in the order of `names()`."""
+
+    def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Design:
+        return jnp.stack(self.column_list(sig), axis=1)
+
+
 class AbstractSignalTerm(AbstractTorqueFreeTerm):
     """A one-column, torque-free term that is a function of one named signal, written once for
-    both array libraries: subclasses implement `transform(x, xp)` with `xp` either `jax.numpy`
-    or `numpy`, and `signal_name` (the signal it reads)."""
-
-    @property
-    @abc.abstractmethod
-    def signal_name(self) -> str:
-        """The signal (or extra column) the term reads."""
+    both array libraries: subclasses have a `signal` (a field or a property: the signal or extra
+    column it reads) and implement `transform(x, xp)` with `xp` either `jax.numpy` or
+    `numpy`."""
 
     @abc.abstractmethod
-    def transform(self, x, xp):
+    def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         """The column as a function of the signal `x`, with array namespace `xp`."""
 
-    def columns(self, sig, torque=None):
-        return self.transform(sig.get(self.signal_name), jnp)[:, None]
+    def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
+        return self.transform(sig.get(self.signal), jnp)[:, None]
 
-    def numpy_columns(self, sig, torque=None) -> np.ndarray:
-        return self.transform(np.asarray(sig.get(self.signal_name)), np)[:, None]
+    def numpy_columns(
+        self, sig: Signals, torque: SamplesLike | None = None
+    ) -> Float[np.ndarray, "n 1"]:
+        return self.transform(np.asarray(sig.get(self.signal)), np)[:, None]
 
 
 class AbstractLinearTorqueTerm(AbstractTerm):
@@ -180,23 +195,23 @@ class AbstractLinearTorqueTerm(AbstractTerm):
     torque_kind: ClassVar[str] = "linear"
 
     @abc.abstractmethod
-    def torque_slope(self, sig):
+    def torque_slope(self, sig: Signals) -> Float[Array, "n ..."]:
         r"""$u(x)$ with $\psi = u(x) T$."""
 
     @abc.abstractmethod
-    def numpy_torque_slope(self, sig) -> np.ndarray:
+    def numpy_torque_slope(self, sig: Signals) -> Float[np.ndarray, "n ..."]:
         """`torque_slope` in NumPy."""
 
-    def torque_gain(self, sig, coef):
+    def torque_gain(self, sig: Signals, coef: Float[ArrayLike, " k"]) -> Samples:
         r"""$\partial\psi/\partial T = u(x)\,c$ for the group's fitted coefficients `coef`."""
         u = self.torque_slope(sig)
         return u @ coef if u.ndim == 2 else u * coef[0]
 
-    def columns(self, sig, torque):
+    def columns(self, sig: Signals, torque: SamplesLike) -> Design:
         u = self.torque_slope(sig)
         return (u if u.ndim == 2 else u[:, None]) * torque[:, None]
 
-    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+    def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         u = self.numpy_torque_slope(sig)
         return (u if u.ndim == 2 else u[:, None]) * np.asarray(torque)[:, None]
 
@@ -211,17 +226,21 @@ class AbstractMemorylessTerm(AbstractTerm):
     torque_kind: ClassVar[str] = "memoryless"
 
     @abc.abstractmethod
-    def value_and_slope(self, torque):
+    def value_and_slope(
+        self, torque: Pointwise
+    ) -> tuple[Float[ArrayLike, "*shape"], Float[ArrayLike, "*shape"]]:
         """$(f(T), f'(T))$."""
 
     @abc.abstractmethod
-    def numpy_value(self, torque) -> np.ndarray:
+    def numpy_value(self, torque: Pointwise) -> Float[np.ndarray, "*shape"]:
         """$f(T)$ in NumPy."""
 
-    def columns(self, sig, torque):
+    def columns(self, sig: Signals, torque: SamplesLike) -> Float[Array, "n 1"]:
         return self.value_and_slope(torque)[0][:, None]
 
-    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+    def numpy_columns(
+        self, sig: Signals, torque: SamplesLike | None = None
+    ) -> Float[np.ndarray, "n 1"]:
         return self.numpy_value(np.asarray(torque))[:, None]
 
 
@@ -240,14 +259,73 @@ class AbstractPathTerm(AbstractTerm):
 class AbstractPlantEffect(eqx.Module):
     """An effect the plant simulates: array parameters (differentiable) and `reciprocals()`.
 
-    `reciprocals()` returns the inverses of its scale parameters (name -> array); the simulator
-    computes them once outside the time loop and passes them back as `inv=`, because a division
-    by a parameter inside the loop keeps XLA from fusing the step (see `hdjax/plant/_dynamics.py`).
+    `reciprocals()` returns the inverses of its scale parameters (name -> array; the fields
+    declared `bound(..., inverse=True)`); the simulator computes them once outside the time
+    loop and passes them back as `inv=`, because a division by a parameter inside the loop
+    keeps XLA from fusing the step (see `hdjax/plant/_dynamics.py`).
+
+    [`from_params`][] builds one from a parameter table, validated in plain Python: the
+    fields' jaxtyping annotations give the shapes (`Float[Array, ""]` a number,
+    `Float[Array, " n"]` a list, fields naming the same dimension of equal length) and
+    [`bound`][] the signs.
     """
 
-    @abc.abstractmethod
     def reciprocals(self) -> dict:
-        """Inverses of the scale parameters, computed once outside the time loop."""
+        """Inverses of the scale parameters (those declared `bound(..., inverse=True)`),
+        computed once outside the time loop."""
+        return {
+            f.name: 1.0 / getattr(self, f.name)
+            for f in dataclasses.fields(self)
+            if f.metadata.get("inverse")
+        }
+
+    @classmethod
+    def entry(cls, name: str, slot: str, defaults: Callable) -> PlantEffect:
+        """The [`PlantEffect`][] that switches this effect on as `name` in `slot`, with the
+        `defaults` given and built by [`from_params`][]."""
+        return PlantEffect(name, slot, defaults, cls.from_params)
+
+    @classmethod
+    def from_params(cls, name: str, params: Mapping) -> AbstractPlantEffect:
+        """The effect `name` from its parameters `params` (field name -> value; the static
+        fields are passed as they are), after checking each array parameter's shape, that it
+        is finite and its [`bound`][]; `ConfigError` naming the parameter otherwise."""
+        hints = _array_hints(cls)
+        sizes: dict[str, tuple] = {}
+        values = {}
+        for f in dataclasses.fields(cls):
+            if f.name not in hints:
+                if f.name in params:
+                    values[f.name] = params[f.name]
+                continue
+            dims = hints[f.name]
+            value = params[f.name]
+            if dims:
+                value = vector(name, f.name, value)
+                shape = sizes.setdefault(dims[0], tuple(value.shape))
+            else:
+                shape = ()
+            rule = f.metadata.get("bound", "finite")
+            require(
+                name,
+                f.name,
+                value,
+                positive=rule == "positive",
+                nonneg=rule == "nonneg",
+                shape=shape,
+            )
+            values[f.name] = f64(value)
+        return cls(**values)
+
+
+@functools.cache
+def _array_hints(cls) -> dict[str, tuple[str, ...]]:
+    # field name -> its dimension names, for the fields annotated as jaxtyping arrays
+    out = {}
+    for field_name, hint in typing.get_type_hints(cls).items():
+        if hasattr(hint, "dim_str"):
+            out[field_name] = tuple(hint.dim_str.split())
+    return out
 
 
 class AbstractFriction(AbstractPlantEffect):
@@ -256,11 +334,11 @@ class AbstractFriction(AbstractPlantEffect):
     speed [N·m·s/rad] (the integrator's stability check uses it)."""
 
     @abc.abstractmethod
-    def __call__(self, omega, inv=None):
+    def __call__(self, omega: Pointwise, inv: dict | None = None) -> PointwiseOut:
         """The friction torque at speed `omega`."""
 
     @abc.abstractmethod
-    def max_slope(self):
+    def max_slope(self) -> Float[Array, ""]:
         """The largest slope of the friction law (a float or a 0-d array)."""
 
 
@@ -270,15 +348,15 @@ class AbstractHysteresis(AbstractPlantEffect):
     stiffness right after a reversal, for the integrator's stability check)."""
 
     @abc.abstractmethod
-    def rate(self, z, d_dot, inv=None):
+    def rate(self, z: Pointwise, d_dot: Pointwise, inv: dict | None = None) -> PointwiseOut:
         """$\\dot z$ at hysteresis torque `z` and deflection rate `d_dot`."""
 
     @abc.abstractmethod
-    def saturation(self):
+    def saturation(self) -> Float[Array, ""]:
         """The loop's half-height [N·m]."""
 
     @abc.abstractmethod
-    def initial_stiffness(self):
+    def initial_stiffness(self) -> Float[Array, ""]:
         """$dz/dd$ right after a reversal [N·m/rad]."""
 
 
@@ -297,46 +375,6 @@ def check_slot(name: str, slot: str, effect) -> None:
             f"plant effect {name!r} in slot {slot!r} must be an {base.__name__}, got "
             f"{type(effect).__name__}"
         )
-
-
-def f64(x):
-    """`x` as a float64 JAX array."""
-    return jnp.asarray(x, jnp.float64)
-
-
-def concrete(x):
-    """A NumPy copy of `x` when it is concrete, else None (inside a trace)."""
-    try:
-        return np.asarray(x, dtype=np.float64)
-    except Exception:  # a tracer
-        return None
-
-
-def require(name: str, field: str, value, *, positive=False, nonneg=False, shape=None):
-    """Validate one plant-effect parameter in plain Python (skipped for tracers)."""
-    arr = concrete(value)
-    if arr is None:
-        return
-    if shape is not None and arr.shape != shape:
-        raise ConfigError(
-            f"effect {name!r}: parameter {field!r} must have shape {shape}, got {arr.shape}"
-        )
-    if not np.all(np.isfinite(arr)):
-        raise ConfigError(f"effect {name!r}: parameter {field!r} must be finite, got {arr}")
-    if positive and not np.all(arr > 0):
-        raise ConfigError(f"effect {name!r}: parameter {field!r} must be positive, got {arr}")
-    if nonneg and not np.all(arr >= 0):
-        raise ConfigError(f"effect {name!r}: parameter {field!r} must be non-negative, got {arr}")
-
-
-def vector(name: str, field: str, value):
-    """A 1-D float64 parameter, refusing other ranks."""
-    arr = concrete(value)
-    if arr is not None and arr.ndim != 1:
-        raise ConfigError(
-            f"effect {name!r}: parameter {field!r} must be a 1-D list, got shape {arr.shape}"
-        )
-    return f64(value)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -365,6 +403,25 @@ class PlantEffect:
             )
 
 
+SIDES = {
+    "friction": ("motor_friction", "output_friction"),
+    "kinematic": ("kinematic_m", "kinematic_l"),
+    "compliance_ripple": ("compliance_ripple_m", "compliance_ripple_l"),
+}
+"""The slot pairs of the effects that act on the motor side and on the output side."""
+
+
+def both_sides(stem: str, sides: str, build: Callable, *, motor: Callable, output: Callable):
+    """The plant effects `<stem>_m` and `<stem>_l` of a family acting on either side of the
+    joint, in the slot pair [`SIDES`][]`[sides]`, with one builder and the defaults `motor`
+    and `output` (see [`PlantEffect`][])."""
+    slot_m, slot_l = SIDES[sides]
+    return (
+        PlantEffect(f"{stem}_m", slot_m, motor, build),
+        PlantEffect(f"{stem}_l", slot_l, output, build),
+    )
+
+
 # ---------------------------------------------------------------------------------------------
 # Candidates for the residual loop
 # ---------------------------------------------------------------------------------------------
@@ -376,8 +433,13 @@ class Candidate:
 
     key: str
     family: str
-    term: object
+    term: AbstractTerm
     origin: str = "grid"
+
+    @classmethod
+    def of(cls, term: AbstractTerm, origin: str = "grid") -> Candidate:
+        """The candidate that adds `term`, under its own key as key and family."""
+        return cls(term.key, term.key, term, origin)
 
 
 @dataclasses.dataclass
@@ -397,9 +459,9 @@ class CandidateContext:
     passes residual ÷ torque).
     """
 
-    sig: Any
-    torque: Any
-    residual: Any
+    sig: Signals
+    torque: SamplesLike
+    residual: SamplesLike
     ratio: float
     rated_torque: float
     twist_sign: float
@@ -427,27 +489,37 @@ class CandidateContext:
 class AbstractFamily(eqx.Module):
     """One physical effect family: its terms, plant effects, vocabulary and candidates.
 
-    **Class variables every family declares:**
+    **Class variables:** every family declares
 
-    - `name`: short name (`"coulomb"`).
+    - `name`: short name (`"coulomb"`);
     - `terms`: its [`hdjax.effects.AbstractTerm`][] classes (the saved-model type table is the
-      union over the registered families).
-    - `plant_effects`: its [`hdjax.effects.PlantEffect`][] entries (may be empty).
+      union over the registered families);
+
+    and, where it has them,
+
+    - `plant_effects`: its [`hdjax.effects.PlantEffect`][] entries (default none);
     - `discover_families`: the names the residual loop offers it under
-      (`"coulomb:omega_m"`, ...; may be empty).
-    - `vocabulary`: the keys it reports, as written in a discover report (may be empty).
-    - `options`: library options (grids) with their defaults; they become fields of
-      [`hdjax.discover.LibraryOptions`][].
+      (`"coulomb:omega_m"`, ...; default none);
+    - `vocabulary`: the keys it reports, as written in a discover report (default: its
+      `discover_families`, comma-separated; see [`vocabulary_text`][]);
+    - `options`: library options (grids) with their defaults (default none); they become
+      fields of [`hdjax.discover.LibraryOptions`][].
 
     **Method:** `candidates(ctx)`: the terms to try at one step of the residual loop.
     """
 
     name: eqx.AbstractClassVar[str]
     terms: eqx.AbstractClassVar[tuple]
-    plant_effects: eqx.AbstractClassVar[tuple]
-    discover_families: eqx.AbstractClassVar[tuple]
-    vocabulary: eqx.AbstractClassVar[str]
-    options: eqx.AbstractClassVar[dict]
+    plant_effects: ClassVar[tuple] = ()
+    discover_families: ClassVar[tuple] = ()
+    vocabulary: ClassVar[str | None] = None
+    options: ClassVar[dict] = {}
+
+    def vocabulary_text(self) -> str:
+        """The keys this family reports, as a discover report writes them."""
+        if self.vocabulary is None:
+            return ", ".join(self.discover_families)
+        return self.vocabulary
 
     def __check_init__(self):
         owner = f"effect family {type(self).__name__}"

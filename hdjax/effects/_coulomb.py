@@ -16,47 +16,27 @@ friction", Automatica 30(7), 1994.
 
 from __future__ import annotations
 
+from types import ModuleType
 from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 
-from .._custom_types import Array, Float
-from ._base import (
-    AbstractFamily,
-    AbstractFriction,
-    AbstractSignalTerm,
-    Candidate,
-    PlantEffect,
-    check_positive,
-    f64,
-    fmt,
-    require,
-)
+from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, SamplesLike
+from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm
+from ._fields import bound, hyper, labels
+from ._friction import friction_effects, velocity_candidates
 
 
 class Coulomb(AbstractSignalTerm):
     """Coulomb-like friction signature, a smooth sign $\\tanh(\\omega/\\omega_s)$ of a velocity."""
 
     signal: str = eqx.field(default="omega_m", static=True)
-    omega_s: float = eqx.field(default=1.0, static=True)
+    omega_s: float = hyper(1.0, positive=True)
 
-    def __check_init__(self):
-        check_positive("Coulomb", "omega_s", self.omega_s)
+    key, names = labels("coulomb:{signal}", "tanh({signal}/{omega_s})")
 
-    @property
-    def key(self) -> str:
-        return f"coulomb:{self.signal}"
-
-    def names(self) -> tuple[str, ...]:
-        return (f"tanh({self.signal}/{fmt(self.omega_s)})",)
-
-    @property
-    def signal_name(self) -> str:
-        return self.signal
-
-    def transform(self, x, xp):
+    def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         return xp.tanh(x / self.omega_s)
 
 
@@ -64,62 +44,31 @@ class CoulombFriction(AbstractFriction):
     r"""Coulomb friction $F_c \tanh(\omega/\omega_s)$ [N·m] (`level` $F_c$, `smoothing`
     $\omega_s$)."""
 
-    level: Float[Array, ""]
-    smoothing: Float[Array, ""]
+    level: Float[Array, ""] = bound("nonneg")
+    smoothing: Float[Array, ""] = bound("positive", inverse=True)
 
-    def reciprocals(self):
-        return {"smoothing": 1.0 / self.smoothing}
-
-    def __call__(self, omega, inv=None):
+    def __call__(self, omega: Pointwise, inv: dict | None = None) -> PointwiseOut:
         inv = self.reciprocals() if inv is None else inv
         return self.level * jnp.tanh(omega * inv["smoothing"])
 
-    def max_slope(self):
+    def max_slope(self) -> Float[Array, ""]:
         return self.level / self.smoothing
 
 
-def _build(name: str, p: dict) -> CoulombFriction:
-    require(name, "level", p["level"], nonneg=True, shape=())
-    require(name, "smoothing", p["smoothing"], positive=True, shape=())
-    return CoulombFriction(f64(p["level"]), f64(p["smoothing"]))
-
-
-def velocity_rms(sig, signal: str) -> float:
-    """RMS of a velocity signal (the scale of friction grids)."""
-    w = np.asarray(sig.get(signal))
-    return float(np.sqrt(np.mean(w**2)))
-
-
 class CoulombFamily(AbstractFamily):
-    """Coulomb friction: plant `coulomb_m`, `coulomb_l`; term `Coulomb`; a grid of $\\omega_s$."""
+    """Coulomb friction: plant `coulomb_m`, `coulomb_l`; term `Coulomb`; a grid of smoothing
+    speeds $\\omega_s$, fractions of the velocity's RMS."""
 
     name: ClassVar[str] = "coulomb"
     terms: ClassVar[tuple] = (Coulomb,)
-    plant_effects: ClassVar[tuple] = (
-        PlantEffect(
-            "coulomb_m",
-            "motor_friction",
-            lambda rated, k1, given: dict(level=0.1, smoothing=0.5),
-            _build,
-        ),
-        PlantEffect(
-            "coulomb_l",
-            "output_friction",
-            lambda rated, k1, given: dict(level=0.0075 * rated, smoothing=5e-3),
-            _build,
-        ),
+    plant_effects: ClassVar[tuple] = friction_effects(
+        "coulomb",
+        CoulombFriction.from_params,
+        motor=lambda rated, k1, given: dict(level=0.1, smoothing=0.5),
+        output=lambda rated, k1, given: dict(level=0.0075 * rated, smoothing=5e-3),
     )
     discover_families: ClassVar[tuple] = ("coulomb:omega_m", "coulomb:omega_l")
-    vocabulary: ClassVar[str] = "coulomb:omega_m, coulomb:omega_l"
     options: ClassVar[dict] = {"smoothing_fractions": (0.003, 0.01, 0.03, 0.1, 0.3)}
 
     def candidates(self, ctx):
-        out = []
-        for signal in ("omega_m", "omega_l"):
-            rms = velocity_rms(ctx.sig, signal)
-            if rms == 0.0 or not ctx.wants(f"coulomb:{signal}"):
-                continue
-            for frac in ctx.option(self, "smoothing_fractions"):
-                term = Coulomb(signal=signal, omega_s=float(f"{frac * rms:.4g}"))
-                out.append(Candidate(term.key, term.key, term))
-        return out
+        return velocity_candidates(ctx, "coulomb", Coulomb, ctx.option(self, "smoothing_fractions"))

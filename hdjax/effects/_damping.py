@@ -15,10 +15,12 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import equinox as eqx
 import numpy as np
 
-from ._base import AbstractFamily, AbstractTorqueFreeTerm, Candidate, check_positive, fmt
+from .._custom_types import Array, Float, SamplesLike
+from .._features import Signals
+from ._base import AbstractFamily, AbstractTorqueFreeTerm, Candidate
+from ._fields import hyper, labels, rounded
 
 
 class TwistRate(AbstractTorqueFreeTerm):
@@ -26,39 +28,33 @@ class TwistRate(AbstractTorqueFreeTerm):
     \\omega_m/N)$ (eq. (5) differentiated), divided by `scale`. A damped flexspline carries
     $c\\dot{\\Delta\\theta}$ on top of its elastic torque, which the twist alone cannot show."""
 
-    ratio: float = eqx.field(default=1.0, static=True)
-    sign: float = eqx.field(default=1.0, static=True)
-    scale: float = eqx.field(default=1.0, static=True)
+    ratio: float = hyper(1.0, positive=True)
+    sign: float = hyper(1.0)
+    scale: float = hyper(1.0, positive=True)
 
-    def __check_init__(self):
-        check_positive("TwistRate", "ratio", self.ratio)
-        check_positive("TwistRate", "scale", self.scale)
+    key, names = labels("damping:twist_rate", "twist_rate/{scale}")
 
-    @property
-    def key(self) -> str:
-        return "damping:twist_rate"
+    def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
+        return self._column(sig.omega_m, sig.omega_l)[:, None]
 
-    def names(self) -> tuple[str, ...]:
-        return (f"twist_rate/{fmt(self.scale)}",)
+    def numpy_columns(
+        self, sig: Signals, torque: SamplesLike | None = None
+    ) -> Float[np.ndarray, "n 1"]:
+        return self._column(np.asarray(sig.omega_m), np.asarray(sig.omega_l))[:, None]
 
-    def columns(self, sig, torque=None):
-        rate = self.sign * (sig.omega_l - sig.omega_m / self.ratio)
-        return (rate / self.scale)[:, None]
-
-    def numpy_columns(self, sig, torque=None) -> np.ndarray:
-        rate = self.sign * (np.asarray(sig.omega_l) - np.asarray(sig.omega_m) / self.ratio)
-        return (rate / self.scale)[:, None]
+    def _column(self, omega_m, omega_l):
+        # the same arithmetic for JAX and NumPy arrays
+        return self.sign * (omega_l - omega_m / self.ratio) / self.scale
 
 
 class DampingFamily(AbstractFamily):
-    """Structural damping: the plant's `damping` parameter; term `TwistRate`."""
+    """Structural damping: the plant's `damping` parameter (no switchable effect); term
+    `TwistRate`, one candidate scaled by the twist rate's RMS."""
 
     name: ClassVar[str] = "damping"
     terms: ClassVar[tuple] = (TwistRate,)
     plant_effects: ClassVar[tuple] = ()
     discover_families: ClassVar[tuple] = ("damping:twist_rate",)
-    vocabulary: ClassVar[str] = "damping:twist_rate"
-    options: ClassVar[dict] = {}
 
     def candidates(self, ctx):
         if not ctx.wants("damping:twist_rate"):
@@ -67,7 +63,5 @@ class DampingFamily(AbstractFamily):
         rms = float(np.sqrt(np.mean(rate**2)))
         if rms == 0.0:
             return []
-        term = TwistRate(
-            ratio=float(ctx.ratio), sign=float(ctx.twist_sign), scale=float(f"{rms:.4g}")
-        )
-        return [Candidate(term.key, term.key, term)]
+        term = TwistRate(ratio=float(ctx.ratio), sign=float(ctx.twist_sign), scale=rounded(rms))
+        return [Candidate.of(term)]

@@ -24,8 +24,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, Float
+from .._custom_types import (
+    Array,
+    ArrayLike,
+    Float,
+    Pointwise,
+    PointwiseOut,
+    Samples,
+    SamplesLike,
+    Shaped,
+)
 from .._errors import ConfigError, did_you_mean
+from .._features import Signals
 from ._base import (
     SEGMENT_START,
     TORQUE_PATH,
@@ -35,15 +45,13 @@ from ._base import (
     AbstractTorqueFreeTerm,
     Candidate,
     PlantEffect,
-    check_positive,
-    concrete,
-    f64,
-    fmt,
-    require,
 )
+from ._fields import bound, concrete, hyper, labels
 
 
-def dahl_state(torque, torque_scale: float, reset=None):
+def dahl_state(
+    torque: SamplesLike, torque_scale: float, reset: Shaped[ArrayLike, " n"] | None = None
+) -> Samples:
     """Causal Dahl-type hysteresis state driven by a torque path.
 
     $z_k = z_{k-1} + \\frac{\\Delta T_k}{T_h} (1 - z_{k-1}\\,\\mathrm{sgn}\\,\\Delta T_k)$,
@@ -135,25 +143,19 @@ class Hysteresis(AbstractPathTerm):
     model's estimate), else by the reference torque.
     """
 
-    torque_scale: float = eqx.field(default=1.0, static=True)
+    torque_scale: float = hyper(1.0, positive=True)
 
-    def __check_init__(self):
-        check_positive("Hysteresis", "torque_scale", self.torque_scale)
+    key, names = labels("hysteresis:torque", "dahl(T/{torque_scale})")
 
-    @property
-    def key(self) -> str:
-        return "hysteresis:torque"
-
-    def names(self) -> tuple[str, ...]:
-        return (f"dahl(T/{fmt(self.torque_scale)})",)
-
-    def columns(self, sig, torque):
+    def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
         # A torque path supplied with the signals (the estimate of a previous model, so that
         # calibration sees the state the estimator will see) takes precedence.
         driver = sig.extras.get(TORQUE_PATH, torque)
         return dahl_state(driver, self.torque_scale, sig.extras.get(SEGMENT_START))[:, None]
 
-    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+    def numpy_columns(
+        self, sig: Signals, torque: SamplesLike | None = None
+    ) -> Float[np.ndarray, "n 1"]:
         driver = sig.extras.get(TORQUE_PATH, torque)
         reset = sig.extras.get(SEGMENT_START)
         reset = None if reset is None else np.asarray(reset)
@@ -174,32 +176,25 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
     torque path, as for [`Hysteresis`][]. Restarts at gaps (`SEGMENT_START`).
     """
 
-    torque_scale: float = eqx.field(default=1.0, static=True)
-    compliance: float = eqx.field(default=1.0, static=True)
+    torque_scale: float = hyper(1.0, positive=True)
+    compliance: float = hyper(1.0, positive=True)
 
-    def __check_init__(self):
-        check_positive("TwistHysteresis", "torque_scale", self.torque_scale)
-        check_positive("TwistHysteresis", "compliance", self.compliance)
+    key, names = labels("hysteresis:torque", "dahl(twist/{compliance}/{torque_scale})")
 
-    @property
-    def key(self) -> str:
-        return "hysteresis:torque"
-
-    def names(self) -> tuple[str, ...]:
-        return (f"dahl(twist/{fmt(self.compliance)}/{fmt(self.torque_scale)})",)
-
-    def columns(self, sig, torque=None):
+    def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
         driver = sig.twist / self.compliance
         return dahl_state(driver, self.torque_scale, sig.extras.get(SEGMENT_START))[:, None]
 
-    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+    def numpy_columns(
+        self, sig: Signals, torque: SamplesLike | None = None
+    ) -> Float[np.ndarray, "n 1"]:
         reset = sig.extras.get(SEGMENT_START)
         reset = None if reset is None else np.asarray(reset)
         driver = np.asarray(sig.twist) / self.compliance
         return dahl_state_numpy(driver, self.torque_scale, reset)[:, None]
 
 
-def twist_compliance(sig, torque, rated_torque: float) -> float:
+def twist_compliance(sig: Signals, torque: SamplesLike, rated_torque: float) -> float:
     """The small-torque compliance [rad/(N·m)]: the least-squares slope of the twist against
     the reference torque over $|T| < \\tau_0/3$ (all samples if too few), 4 significant digits
     (a static field of [`TwistHysteresis`][])."""
@@ -233,24 +228,21 @@ class BoucWen(AbstractHysteresis):
     Absolute values are smoothed ($\sqrt{x^2+\epsilon}$) so gradients exist.
     """
 
-    a: Float[Array, ""]
+    a: Float[Array, ""] = bound("positive")
     beta: Float[Array, ""]
     gamma: Float[Array, ""]
     n: int = eqx.field(static=True, default=1)
 
-    def reciprocals(self):
-        return {}
-
-    def rate(self, z, d_dot, inv=None):
+    def rate(self, z: Pointwise, d_dot: Pointwise, inv: dict | None = None) -> PointwiseOut:
         az = _abs(z, 1e-12)
         ad = _abs(d_dot, 1e-16)
         zn = az ** (self.n - 1) if self.n > 1 else 1.0
         return self.a * d_dot - self.beta * ad * zn * z - self.gamma * d_dot * zn * az
 
-    def saturation(self):
+    def saturation(self) -> Float[Array, ""]:
         return (self.a / (self.beta + self.gamma)) ** (1.0 / self.n)
 
-    def initial_stiffness(self):
+    def initial_stiffness(self) -> Float[Array, ""]:
         return self.a
 
 
@@ -261,20 +253,17 @@ class Dahl(AbstractHysteresis):
     (the half-height of the loop).
     """
 
-    sigma: Float[Array, ""]
-    level: Float[Array, ""]
+    sigma: Float[Array, ""] = bound("positive")
+    level: Float[Array, ""] = bound("positive", inverse=True)
 
-    def reciprocals(self):
-        return {"level": 1.0 / self.level}
-
-    def rate(self, z, d_dot, inv=None):
+    def rate(self, z: Pointwise, d_dot: Pointwise, inv: dict | None = None) -> PointwiseOut:
         inv = self.reciprocals() if inv is None else inv
         return self.sigma * (d_dot - _abs(d_dot, 1e-16) * z * inv["level"])
 
-    def saturation(self):
+    def saturation(self) -> Float[Array, ""]:
         return self.level
 
-    def initial_stiffness(self):
+    def initial_stiffness(self) -> Float[Array, ""]:
         return self.sigma
 
 
@@ -285,25 +274,22 @@ class LuGre(AbstractHysteresis):
     $g(v) = F_c + (F_s - F_c) e^{-(v/v_s)^2}$, so the loop height depends on the deflection rate.
     """
 
-    sigma0: Float[Array, ""]
-    level: Float[Array, ""]
-    peak: Float[Array, ""]
-    speed: Float[Array, ""]
+    sigma0: Float[Array, ""] = bound("positive")
+    level: Float[Array, ""] = bound("positive")
+    peak: Float[Array, ""] = bound("positive")
+    speed: Float[Array, ""] = bound("positive", inverse=True)
 
-    def reciprocals(self):
-        return {"speed": 1.0 / self.speed}
-
-    def rate(self, z, d_dot, inv=None):
+    def rate(self, z: Pointwise, d_dot: Pointwise, inv: dict | None = None) -> PointwiseOut:
         inv = self.reciprocals() if inv is None else inv
         x = d_dot * inv["speed"]
         g = self.level + (self.peak - self.level) * jnp.exp(-(x * x))
         return self.sigma0 * (d_dot - _abs(d_dot, 1e-16) * z / g)
 
-    def saturation(self):
+    def saturation(self) -> Float[Array, ""]:
         """Loop half-height at deflection rates well above `speed`."""
         return self.level
 
-    def initial_stiffness(self):
+    def initial_stiffness(self) -> Float[Array, ""]:
         return self.sigma0
 
 
@@ -333,32 +319,28 @@ def _defaults(rated: float, k1: float, given) -> dict:
     return dict(model="bouc_wen", a=0.5 * stiff, beta=0.5 * stiff / level, gamma=0.0, n=1)
 
 
+_LAWS = {"bouc_wen": BoucWen, "dahl": Dahl, "lugre": LuGre}
+
+
 def _build(name: str, p: dict):
     model = p["model"]
     _check_model(model)
+    params = {k: v for k, v in p.items() if k != "model"}
     if model == "bouc_wen":
         n = p["n"]
         if not isinstance(n, int) or isinstance(n, bool) or n < 1:
             raise ConfigError(
                 f"effect 'hysteresis': Bouc-Wen exponent n must be an int >= 1, got {n!r}"
             )
-        require(name, "a", p["a"], positive=True, shape=())
-        require(name, "beta", p["beta"], shape=())
-        require(name, "gamma", p["gamma"], shape=())
-        b, g = concrete(p["beta"]), concrete(p["gamma"])
+    law = _LAWS[model].from_params(name, params)
+    if model == "bouc_wen":
+        b, g = concrete(law.beta), concrete(law.gamma)
         if b is not None and g is not None and not (b + g > 0 and b - g >= 0):
             raise ConfigError(
                 f"effect 'hysteresis': Bouc-Wen needs beta + gamma > 0 and beta >= gamma "
                 f"(a bounded, dissipative loop), got beta={float(b)}, gamma={float(g)}"
             )
-        return BoucWen(f64(p["a"]), f64(p["beta"]), f64(p["gamma"]), n)
-    if model == "dahl":
-        require(name, "sigma", p["sigma"], positive=True, shape=())
-        require(name, "level", p["level"], positive=True, shape=())
-        return Dahl(f64(p["sigma"]), f64(p["level"]))
-    for f in ("sigma0", "level", "peak", "speed"):
-        require(name, f, p[f], positive=True, shape=())
-    return LuGre(f64(p["sigma0"]), f64(p["level"]), f64(p["peak"]), f64(p["speed"]))
+    return law
 
 
 class HysteresisFamily(AbstractFamily):
@@ -369,7 +351,6 @@ class HysteresisFamily(AbstractFamily):
     terms: ClassVar[tuple] = (Hysteresis, TwistHysteresis)
     plant_effects: ClassVar[tuple] = (PlantEffect("hysteresis", "hysteresis", _defaults, _build),)
     discover_families: ClassVar[tuple] = ("hysteresis:torque",)
-    vocabulary: ClassVar[str] = "hysteresis:torque"
     options: ClassVar[dict] = {"dahl_fractions": (0.01, 0.025, 0.05, 0.1, 0.2)}
 
     def candidates(self, ctx):
@@ -377,8 +358,8 @@ class HysteresisFamily(AbstractFamily):
             return []
         # the state follows the measured deformation (stable, needs no estimate)
         k = twist_compliance(ctx.sig, ctx.torque, ctx.rated_torque)
-        out = []
-        for frac in ctx.option(self, "dahl_fractions"):
-            term = TwistHysteresis(torque_scale=frac * ctx.rated_torque, compliance=k)
-            out.append(Candidate(term.key, term.key, term))
-        return out
+        fractions = ctx.option(self, "dahl_fractions")
+        return [
+            Candidate.of(TwistHysteresis(torque_scale=f * ctx.rated_torque, compliance=k))
+            for f in fractions
+        ]

@@ -17,27 +17,24 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from .. import _trig
-from .._custom_types import Array, Float
+from .._custom_types import Array, Float, NumpyDesign, Pointwise, PointwiseOut, SamplesLike
+from .._features import Signals
 from .._trig import sincos
 from ._base import (
+    AbstractColumnListTerm,
     AbstractFamily,
     AbstractPlantEffect,
-    AbstractTorqueFreeTerm,
     Candidate,
-    PlantEffect,
-    fmt,
-    require,
-    vector,
+    both_sides,
 )
+from ._fields import bound, fmt, hyper
 
 
-def harmonic_pairs(u, order: int):
+def harmonic_pairs(u: PointwiseOut, order: int) -> list[tuple[PointwiseOut, PointwiseOut]]:
     r"""$[(\cos nu, \sin nu)]_{n=1..order}$ by the angle-addition recurrence from one `sincos`."""
     # The barrier materialises sin/cos once: without it XLA fuses (and so recomputes) them into
     # every column that a stacked design materialises separately.
@@ -49,7 +46,7 @@ def harmonic_pairs(u, order: int):
     return out
 
 
-class PaperFourier(AbstractTorqueFreeTerm):
+class PaperFourier(AbstractColumnListTerm):
     """Kinematic error in the paper's form, eq. (9), without its constant $a_0$.
 
     For $n = 1..$`order`: $\\cos(n\\theta_{fso}\\omega_{fso}), \\sin(n\\theta_{fso}\\omega_{fso}),
@@ -58,7 +55,7 @@ class PaperFourier(AbstractTorqueFreeTerm):
     the angles are [`hdjax.compliance.Harmonics`][].)
     """
 
-    order: int = eqx.field(default=3, static=True)
+    order: int = hyper(3)
 
     @property
     def key(self) -> str:
@@ -70,7 +67,7 @@ class PaperFourier(AbstractTorqueFreeTerm):
             out += [f"a{n}", f"b{n}", f"c{n}", f"d{n}"]
         return tuple(out)
 
-    def column_list(self, sig) -> list:
+    def column_list(self, sig: Signals) -> list[Float[Array, " n"]]:
         hl = harmonic_pairs(sig.theta_l * sig.omega_l, self.order)
         hm = harmonic_pairs(sig.theta_m * sig.omega_m, self.order)
         cols = []
@@ -78,10 +75,7 @@ class PaperFourier(AbstractTorqueFreeTerm):
             cols += [cl, sl, cm, sm]
         return cols
 
-    def columns(self, sig, torque=None):
-        return jnp.stack(self.column_list(sig), axis=1)
-
-    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+    def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         ul = np.asarray(sig.theta_l) * np.asarray(sig.omega_l)
         um = np.asarray(sig.theta_m) * np.asarray(sig.omega_m)
         cols = []
@@ -90,12 +84,12 @@ class PaperFourier(AbstractTorqueFreeTerm):
         return np.column_stack(cols)
 
 
-class Harmonics(AbstractTorqueFreeTerm):
+class Harmonics(AbstractColumnListTerm):
     """Harmonics of one angle at a list of (possibly non-integer) orders: $\\cos(k\\theta),
     \\sin(k\\theta)$ per order $k$ - the kinematic error as a function of angle alone."""
 
-    signal: str = eqx.field(default="theta_m", static=True)
-    orders: tuple[float, ...] = eqx.field(default=(1.0, 2.0), static=True)
+    signal: str = hyper("theta_m")
+    orders: tuple[float, ...] = hyper((1.0, 2.0))
 
     @property
     def key(self) -> str:
@@ -107,7 +101,7 @@ class Harmonics(AbstractTorqueFreeTerm):
             out += [f"cos({fmt(k)}*{self.signal})", f"sin({fmt(k)}*{self.signal})"]
         return tuple(out)
 
-    def column_list(self, sig) -> list:
+    def column_list(self, sig: Signals) -> list[Float[Array, " n"]]:
         theta = sig.get(self.signal)
         cols = []
         for k in self.orders:
@@ -115,10 +109,7 @@ class Harmonics(AbstractTorqueFreeTerm):
             cols += [c, s]
         return cols
 
-    def columns(self, sig, torque=None):
-        return jnp.stack(self.column_list(sig), axis=1)
-
-    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+    def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         th = np.asarray(sig.get(self.signal))
         return np.column_stack([f(k * th) for k in self.orders for f in (np.cos, np.sin)])
 
@@ -138,25 +129,11 @@ class KinematicHarmonics(AbstractPlantEffect):
     """
 
     orders: Float[Array, " n"]
-    amplitudes: Float[Array, " n"]
+    amplitudes: Float[Array, " n"] = bound("nonneg")
     phases: Float[Array, " n"]
 
-    def reciprocals(self):
-        return {}
-
-    def __call__(self, angle, inv=None):
+    def __call__(self, angle: Pointwise, inv: dict | None = None) -> PointwiseOut:
         return _trig.harmonic_sum(self.orders, self.amplitudes, self.phases, angle)
-
-
-def _build(name: str, p: dict) -> KinematicHarmonics:
-    orders = vector(name, "orders", p["orders"])
-    amps = vector(name, "amplitudes", p["amplitudes"])
-    phases = vector(name, "phases", p["phases"])
-    n = orders.shape
-    require(name, "orders", orders, shape=n)
-    require(name, "amplitudes", amps, nonneg=True, shape=n)
-    require(name, "phases", phases, shape=n)
-    return KinematicHarmonics(orders, amps, phases)
 
 
 _ARCMIN = np.pi / (180.0 * 60.0)
@@ -174,20 +151,15 @@ class KinematicFamily(AbstractFamily):
     name: ClassVar[str] = "kinematic"
     terms: ClassVar[tuple] = (PaperFourier, Harmonics)
     # transmission accuracy ~1 arcmin peak-to-peak split over motor- and load-side harmonics
-    plant_effects: ClassVar[tuple] = (
-        PlantEffect(
-            "harmonic_m",
-            "kinematic_m",
-            lambda rated, k1, given: dict(orders=[2.0], amplitudes=[0.15 * _ARCMIN], phases=[0.3]),
-            _build,
+    plant_effects: ClassVar[tuple] = both_sides(
+        "harmonic",
+        "kinematic",
+        KinematicHarmonics.from_params,
+        motor=lambda rated, k1, given: dict(
+            orders=[2.0], amplitudes=[0.15 * _ARCMIN], phases=[0.3]
         ),
-        PlantEffect(
-            "harmonic_l",
-            "kinematic_l",
-            lambda rated, k1, given: dict(
-                orders=[1.0, 2.0], amplitudes=[0.2 * _ARCMIN, 0.1 * _ARCMIN], phases=[0.0, 1.1]
-            ),
-            _build,
+        output=lambda rated, k1, given: dict(
+            orders=[1.0, 2.0], amplitudes=[0.2 * _ARCMIN, 0.1 * _ARCMIN], phases=[0.0, 1.1]
         ),
     )
     discover_families: ClassVar[tuple] = ("harmonic:theta_m", "harmonic:theta_l")

@@ -15,10 +15,12 @@ from typing import ClassVar
 import jax.numpy as jnp
 import numpy as np
 
-from ._base import AbstractFamily, AbstractTorqueFreeTerm
+from .._custom_types import Array, Float, SamplesLike
+from .._features import Signals
+from ._base import AbstractColumnListTerm, AbstractFamily
 
 
-class Constant(AbstractTorqueFreeTerm):
+class Constant(AbstractColumnListTerm):
     """Constant offset $k_0 = \\omega_0/N + a_0$ (eq. (10)); also absorbs encoder offsets."""
 
     @property
@@ -28,13 +30,12 @@ class Constant(AbstractTorqueFreeTerm):
     def names(self) -> tuple[str, ...]:
         return ("k0",)
 
-    def column_list(self, sig) -> list:
+    def column_list(self, sig: Signals) -> list[Float[Array, " n"]]:
         return [jnp.ones((sig.n_samples,), jnp.float64)]
 
-    def columns(self, sig, torque=None):
-        return jnp.ones((sig.n_samples, 1), jnp.float64)
-
-    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+    def numpy_columns(
+        self, sig: Signals, torque: SamplesLike | None = None
+    ) -> Float[np.ndarray, "n 1"]:
         return np.ones((sig.n_samples, 1))
 
 
@@ -43,10 +44,6 @@ class OffsetFamily(AbstractFamily):
 
     name: ClassVar[str] = "offset"
     terms: ClassVar[tuple] = (Constant,)
-    plant_effects: ClassVar[tuple] = ()
-    discover_families: ClassVar[tuple] = ()
-    vocabulary: ClassVar[str] = ""
-    options: ClassVar[dict] = {}
 
     def candidates(self, ctx):
         return []

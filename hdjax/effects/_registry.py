@@ -9,6 +9,8 @@ the saved-model type table ([`term_types`][]), the plant's effect names and slot
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 from .._errors import ConfigError, did_you_mean
 from ._base import AbstractFamily, AbstractTerm, PlantEffect
 
@@ -99,7 +101,7 @@ def plant_effect(name: str) -> PlantEffect:
     )
 
 
-def in_slot(names, slot: str) -> tuple[str, ...]:
+def in_slot(names: Iterable[str], slot: str) -> tuple[str, ...]:
     """Those of the effect `names` that enter the plant in `slot`, in registration order."""
     names = set(names)
     return tuple(p.name for p in plant_effects() if p.slot == slot and p.name in names)
@@ -112,7 +114,7 @@ def discover_families() -> tuple[str, ...]:
 
 def vocabulary() -> str:
     """The keys a discover report can name (the report's `vocabulary` entry)."""
-    return ", ".join(f.vocabulary for f in _FAMILIES if f.vocabulary)
+    return ", ".join(f.vocabulary_text() for f in _FAMILIES if f.vocabulary_text())
 
 
 def library_options() -> dict:

@@ -34,26 +34,22 @@ from __future__ import annotations
 import math
 from typing import ClassVar
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from .. import _trig
-from .._custom_types import Array, Float
+from .._custom_types import Array, Bool, Float, Pointwise, PointwiseOut, SamplesLike
 from .._errors import ConfigError
+from .._features import Signals
 from .._trig import sincos
 from ._base import (
     AbstractFamily,
     AbstractLinearTorqueTerm,
     AbstractPlantEffect,
     Candidate,
-    PlantEffect,
-    check_positive,
-    concrete,
-    fmt,
-    require,
-    vector,
+    both_sides,
 )
+from ._fields import bound, concrete, fmt, hyper
 
 MAX_RIPPLE = 0.5
 """Largest total relative ripple $\\sum_j a_j$ the plant accepts (the compliance stays positive)."""
@@ -72,13 +68,9 @@ class Ripple(AbstractLinearTorqueTerm):
     (the rated torque, so the coefficients are twists at rated torque).
     """
 
-    signal: str = eqx.field(default="theta_m", static=True)
-    order: float = eqx.field(default=2.0, static=True)
-    torque_scale: float = eqx.field(default=1.0, static=True)
-
-    def __check_init__(self):
-        check_positive("Ripple", "order", self.order)
-        check_positive("Ripple", "torque_scale", self.torque_scale)
+    signal: str = hyper("theta_m")
+    order: float = hyper(2.0, positive=True)
+    torque_scale: float = hyper(1.0, positive=True)
 
     @property
     def key(self) -> str:
@@ -88,11 +80,11 @@ class Ripple(AbstractLinearTorqueTerm):
         k, s, t = fmt(self.order), self.signal, fmt(self.torque_scale)
         return (f"T/{t}*sin({k}*{s})", f"T/{t}*cos({k}*{s})")
 
-    def torque_slope(self, sig):
+    def torque_slope(self, sig: Signals) -> Float[Array, "n 2"]:
         s, c = sincos(self.order * sig.get(self.signal))
         return jnp.stack([s, c], axis=1) * (1.0 / self.torque_scale)
 
-    def numpy_torque_slope(self, sig) -> np.ndarray:
+    def numpy_torque_slope(self, sig: Signals) -> Float[np.ndarray, "n 2"]:
         th = self.order * np.asarray(sig.get(self.signal))
         return np.column_stack([np.sin(th), np.cos(th)]) / self.torque_scale
 
@@ -106,39 +98,32 @@ class ComplianceRipple(AbstractPlantEffect):
     their sum below 0.5), `phases` $\varphi_j$ [rad], each of shape `(n,)`.
     """
 
-    orders: Float[Array, " n"]
-    amplitudes: Float[Array, " n"]
+    orders: Float[Array, " n"] = bound("positive")
+    amplitudes: Float[Array, " n"] = bound("nonneg")
     phases: Float[Array, " n"]
 
-    def reciprocals(self):
-        return {}
-
-    def __call__(self, angle, inv=None):
+    def __call__(self, angle: Pointwise, inv: dict | None = None) -> PointwiseOut:
         return _trig.harmonic_sum(self.orders, self.amplitudes, self.phases, angle)
 
-    def max_change(self):
+    def max_change(self) -> Float[Array, ""]:
         """$\\sum_j |a_j|$, the largest relative change (the integrator's stiffness check)."""
         return jnp.sum(jnp.abs(self.amplitudes))
 
 
 def _build(name: str, p: dict) -> ComplianceRipple:
-    orders = vector(name, "orders", p["orders"])
-    amps = vector(name, "amplitudes", p["amplitudes"])
-    phases = vector(name, "phases", p["phases"])
-    n = orders.shape
-    require(name, "orders", orders, positive=True, shape=n)
-    require(name, "amplitudes", amps, nonneg=True, shape=n)
-    require(name, "phases", phases, shape=n)
-    total = concrete(amps)
+    ripple = ComplianceRipple.from_params(name, p)
+    total = concrete(ripple.amplitudes)
     if total is not None and not float(np.sum(total)) < MAX_RIPPLE:
         raise ConfigError(
             f"effect {name!r}: the amplitudes are fractions of the compliance and must sum to "
             f"less than {MAX_RIPPLE} (a compliance ripple is a few %), got {total.tolist()}"
         )
-    return ComplianceRipple(orders, amps, phases)
+    return ripple
 
 
-def torque_ratio(residual, torque, rated_torque):
+def torque_ratio(
+    residual: SamplesLike, torque: SamplesLike, rated_torque: float
+) -> tuple[Float[np.ndarray, " m"], Bool[np.ndarray, " n"]]:
     r"""Residual $\div$ torque where the torque is large enough for the ratio to mean something.
 
     Samples with $|T| < \max(0.05\,\tau_0, 0.3\,\mathrm{RMS}(T))$ are left out (near zero torque
@@ -162,19 +147,12 @@ class RippleFamily(AbstractFamily):
 
     name: ClassVar[str] = "ripple"
     terms: ClassVar[tuple] = (Ripple,)
-    plant_effects: ClassVar[tuple] = (
-        PlantEffect(
-            "ripple_m",
-            "compliance_ripple_m",
-            lambda rated, k1, given: dict(orders=[2.0], amplitudes=[0.03], phases=[0.4]),
-            _build,
-        ),
-        PlantEffect(
-            "ripple_l",
-            "compliance_ripple_l",
-            lambda rated, k1, given: dict(orders=[1.0], amplitudes=[0.03], phases=[0.0]),
-            _build,
-        ),
+    plant_effects: ClassVar[tuple] = both_sides(
+        "ripple",
+        "compliance_ripple",
+        _build,
+        motor=lambda rated, k1, given: dict(orders=[2.0], amplitudes=[0.03], phases=[0.4]),
+        output=lambda rated, k1, given: dict(orders=[1.0], amplitudes=[0.03], phases=[0.0]),
     )
     discover_families: ClassVar[tuple] = ("ripple:theta_m", "ripple:theta_l")
     vocabulary: ClassVar[str] = "ripple:theta_m:ORDER, ripple:theta_l:ORDER"

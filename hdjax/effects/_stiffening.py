@@ -12,82 +12,55 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import equinox as eqx
 import numpy as np
 
-from .._custom_types import Array, Float
-from ._base import (
-    AbstractFamily,
-    AbstractMemorylessTerm,
-    AbstractPlantEffect,
-    Candidate,
-    PlantEffect,
-    check_positive,
-    f64,
-    fmt,
-    require,
-)
+from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut
+from ._base import AbstractFamily, AbstractMemorylessTerm, AbstractPlantEffect, Candidate
+from ._fields import bound, hyper, labels
 
 
 class Stiffening(AbstractMemorylessTerm):
     """Nonlinear stiffness beyond the piecewise segments: $(T/\\tau_s)^3$ (odd, smooth)."""
 
-    torque_scale: float = eqx.field(default=1.0, static=True)
+    torque_scale: float = hyper(1.0, positive=True)
 
-    def __check_init__(self):
-        check_positive("Stiffening", "torque_scale", self.torque_scale)
+    key, names = labels("stiffness:torque", "(T/{torque_scale})^3")
 
-    @property
-    def key(self) -> str:
-        return "stiffness:torque"
-
-    def names(self) -> tuple[str, ...]:
-        return (f"(T/{fmt(self.torque_scale)})^3",)
-
-    def value_and_slope(self, torque):
+    def value_and_slope(
+        self, torque: Pointwise
+    ) -> tuple[Float[ArrayLike, "*shape"], Float[ArrayLike, "*shape"]]:
         u = torque / self.torque_scale
         return u**3, 3.0 * u**2 / self.torque_scale
 
-    def numpy_value(self, torque) -> np.ndarray:
+    def numpy_value(self, torque: Pointwise) -> Float[np.ndarray, "*shape"]:
         return (np.asarray(torque) / self.torque_scale) ** 3
 
 
 class CubicSpring(AbstractPlantEffect):
     r"""A cubic spring $\kappa_3 d^3$ [N·m] in parallel with the flexspline (`cubic` $\kappa_3$)."""
 
-    cubic: Float[Array, ""]
+    cubic: Float[Array, ""] = bound("nonneg")
 
-    def reciprocals(self):
-        return {}
-
-    def torque(self, d):
+    def torque(self, d: Pointwise) -> PointwiseOut:
         return self.cubic * d * d * d
 
 
-def _build(name: str, p: dict) -> CubicSpring:
-    require(name, "cubic", p["cubic"], nonneg=True, shape=())
-    return CubicSpring(f64(p["cubic"]))
+def _defaults(rated: float, k1: float, given) -> dict:
+    """A cubic spring that carries 10 % of the rated torque at the rated deflection
+    $\\tau_0 k_1$."""
+    return dict(cubic=0.1 * rated / (rated * k1 * 1.0) ** 3)
 
 
 class StiffeningFamily(AbstractFamily):
-    """Stiffening: plant `stiffening`; term `Stiffening`; one candidate at $\\tau_0$."""
+    """Stiffening: plant `stiffening`; term `Stiffening`; one candidate, at the rated torque
+    $\\tau_0$."""
 
     name: ClassVar[str] = "stiffening"
     terms: ClassVar[tuple] = (Stiffening,)
-    plant_effects: ClassVar[tuple] = (
-        PlantEffect(
-            "stiffening",
-            "spring",
-            lambda rated, k1, given: dict(cubic=0.1 * rated / (rated * k1 * 1.0) ** 3),
-            _build,
-        ),
-    )
+    plant_effects: ClassVar[tuple] = (CubicSpring.entry("stiffening", "spring", _defaults),)
     discover_families: ClassVar[tuple] = ("stiffness:torque",)
-    vocabulary: ClassVar[str] = "stiffness:torque"
-    options: ClassVar[dict] = {}
 
     def candidates(self, ctx):
         if not ctx.wants("stiffness:torque"):
             return []
-        term = Stiffening(torque_scale=float(ctx.rated_torque))
-        return [Candidate(term.key, term.key, term)]
+        return [Candidate.of(Stiffening(torque_scale=float(ctx.rated_torque)))]

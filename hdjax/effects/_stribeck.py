@@ -23,24 +23,17 @@ Section 2 (the Stribeck curve).
 
 from __future__ import annotations
 
+from types import ModuleType
 from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, Float
-from ._base import (
-    AbstractFamily,
-    AbstractFriction,
-    AbstractSignalTerm,
-    Candidate,
-    PlantEffect,
-    check_positive,
-    f64,
-    fmt,
-    require,
-)
-from ._coulomb import Coulomb, velocity_rms
+from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, SamplesLike
+from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm
+from ._coulomb import Coulomb
+from ._fields import bound, hyper, labels
+from ._friction import friction_effects, velocity_candidates
 
 
 class Stribeck(AbstractSignalTerm):
@@ -48,26 +41,14 @@ class Stribeck(AbstractSignalTerm):
     (`omega_st` the Stribeck speed, `omega_s` the smooth sign's speed)."""
 
     signal: str = eqx.field(default="omega_m", static=True)
-    omega_s: float = eqx.field(default=1.0, static=True)
-    omega_st: float = eqx.field(default=1.0, static=True)
+    omega_s: float = hyper(1.0, positive=True)
+    omega_st: float = hyper(1.0, positive=True)
 
-    def __check_init__(self):
-        check_positive("Stribeck", "omega_s", self.omega_s)
-        check_positive("Stribeck", "omega_st", self.omega_st)
+    key, names = labels(
+        "stribeck:{signal}", "exp(-({signal}/{omega_st})^2)*tanh({signal}/{omega_s})"
+    )
 
-    @property
-    def key(self) -> str:
-        return f"stribeck:{self.signal}"
-
-    def names(self) -> tuple[str, ...]:
-        w, st, ws = self.signal, fmt(self.omega_st), fmt(self.omega_s)
-        return (f"exp(-({w}/{st})^2)*tanh({w}/{ws})",)
-
-    @property
-    def signal_name(self) -> str:
-        return self.signal
-
-    def transform(self, x, xp):
+    def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         u = x / self.omega_st
         return xp.exp(-(u * u)) * xp.tanh(x / self.omega_s)
 
@@ -78,27 +59,17 @@ class StribeckFriction(AbstractFriction):
     `peak` is the breakaway torque *above* the Coulomb level, `speed` the Stribeck speed.
     """
 
-    peak: Float[Array, ""]
-    speed: Float[Array, ""]
-    smoothing: Float[Array, ""]
+    peak: Float[Array, ""] = bound("nonneg")
+    speed: Float[Array, ""] = bound("positive", inverse=True)
+    smoothing: Float[Array, ""] = bound("positive", inverse=True)
 
-    def reciprocals(self):
-        return {"speed": 1.0 / self.speed, "smoothing": 1.0 / self.smoothing}
-
-    def __call__(self, omega, inv=None):
+    def __call__(self, omega: Pointwise, inv: dict | None = None) -> PointwiseOut:
         inv = self.reciprocals() if inv is None else inv
         x = omega * inv["speed"]
         return self.peak * jnp.exp(-(x * x)) * jnp.tanh(omega * inv["smoothing"])
 
-    def max_slope(self):
+    def max_slope(self) -> Float[Array, ""]:
         return self.peak / self.smoothing
-
-
-def _build(name: str, p: dict) -> StribeckFriction:
-    require(name, "peak", p["peak"], nonneg=True, shape=())
-    for f in ("speed", "smoothing"):
-        require(name, f, p[f], positive=True, shape=())
-    return StribeckFriction(f64(p["peak"]), f64(p["speed"]), f64(p["smoothing"]))
 
 
 class StribeckFamily(AbstractFamily):
@@ -107,38 +78,26 @@ class StribeckFamily(AbstractFamily):
 
     name: ClassVar[str] = "stribeck"
     terms: ClassVar[tuple] = (Stribeck,)
-    plant_effects: ClassVar[tuple] = (
-        PlantEffect(
-            "stribeck_m",
-            "motor_friction",
-            lambda rated, k1, given: dict(peak=0.05, speed=2.0, smoothing=0.5),
-            _build,
-        ),
-        PlantEffect(
-            "stribeck_l",
-            "output_friction",
-            lambda rated, k1, given: dict(peak=0.005 * rated, speed=0.02, smoothing=5e-3),
-            _build,
-        ),
+    plant_effects: ClassVar[tuple] = friction_effects(
+        "stribeck",
+        StribeckFriction.from_params,
+        motor=lambda rated, k1, given: dict(peak=0.05, speed=2.0, smoothing=0.5),
+        output=lambda rated, k1, given: dict(peak=0.005 * rated, speed=0.02, smoothing=5e-3),
     )
     discover_families: ClassVar[tuple] = ("stribeck:omega_m", "stribeck:omega_l")
-    vocabulary: ClassVar[str] = "stribeck:omega_m, stribeck:omega_l"
     options: ClassVar[dict] = {"stribeck_fractions": (0.1, 0.2, 0.35, 0.6, 1.0, 1.7)}
 
     def candidates(self, ctx):
-        out = []
-        for signal in ("omega_m", "omega_l"):
-            coulomb = [
-                t for t in ctx.existing_terms if isinstance(t, Coulomb) and t.signal == signal
-            ]
-            rms = velocity_rms(ctx.sig, signal)
-            if not coulomb or rms == 0.0 or not ctx.wants(f"stribeck:{signal}"):
-                continue
-            omega_s = coulomb[0].omega_s
-            for frac in ctx.option(self, "stribeck_fractions"):
-                omega_st = float(f"{frac * rms:.4g}")
-                if omega_st <= omega_s:
-                    continue  # an excess narrower than the smooth sign is not a Stribeck curve
-                term = Stribeck(signal=signal, omega_s=omega_s, omega_st=omega_st)
-                out.append(Candidate(term.key, term.key, term))
-        return out
+        # each side's Stribeck excess shares the smooth sign of that side's Coulomb term
+        omega_s = {}
+        for t in ctx.existing_terms:
+            if isinstance(t, Coulomb):
+                omega_s.setdefault(t.signal, t.omega_s)
+
+        def beside_coulomb(signal, omega_st):
+            ws = omega_s.get(signal)
+            # an excess narrower than the smooth sign is not a Stribeck curve
+            return Stribeck(signal, ws, omega_st) if ws is not None and omega_st > ws else None
+
+        fractions = ctx.option(self, "stribeck_fractions")
+        return velocity_candidates(ctx, "stribeck", beside_coulomb, fractions)

@@ -15,48 +15,38 @@ Harmonic Drive CSG/CSF catalogue, efficiency and temperature.
 
 from __future__ import annotations
 
+from types import ModuleType
 from typing import ClassVar
 
-import equinox as eqx
 import numpy as np
 
-from .._custom_types import Array, Float
+from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, Samples, SamplesLike
+from .._features import Signals
 from ._base import (
     AbstractFamily,
     AbstractLinearTorqueTerm,
     AbstractPlantEffect,
     AbstractSignalTerm,
     Candidate,
-    PlantEffect,
-    check_positive,
-    f64,
-    fmt,
-    require,
 )
+from ._fields import bound, hyper, labels, rounded
 
 
 class Column(AbstractSignalTerm):
     """An extra recording column (e.g. `temperature`), centred and scaled: a twist drift."""
 
-    name: str = eqx.field(static=True)
-    center: float = eqx.field(default=0.0, static=True)
-    scale: float = eqx.field(default=1.0, static=True)
+    name: str = hyper()
+    center: float = hyper(0.0)
+    scale: float = hyper(1.0, positive=True)
 
-    def __check_init__(self):
-        check_positive("Column", "scale", self.scale)
-
-    @property
-    def key(self) -> str:
-        return f"column:{self.name}"
-
-    def names(self) -> tuple[str, ...]:
-        return (f"({self.name}-{fmt(self.center)})/{fmt(self.scale)}",)
+    key, names = labels("column:{name}", "({name}-{center})/{scale}")
 
     @property
-    def signal_name(self) -> str:
+    def signal(self) -> str:
+        """The extra column the drift reads (its `name`)."""
         return self.name
 
-    def transform(self, x, xp):
+    def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         return (x - self.center) / self.scale
 
 
@@ -64,28 +54,23 @@ class ColumnTimesTorque(AbstractLinearTorqueTerm):
     """An extra column times torque: a compliance that drifts with e.g. temperature,
     $\\psi = \\frac{x - x_0}{s} \\frac{T}{\\tau_0}$ (linear in torque, inverted in closed form)."""
 
-    name: str = eqx.field(static=True)
-    center: float = eqx.field(default=0.0, static=True)
-    scale: float = eqx.field(default=1.0, static=True)
-    torque_scale: float = eqx.field(default=1.0, static=True)
+    name: str = hyper()
+    center: float = hyper(0.0)
+    scale: float = hyper(1.0, positive=True)
+    torque_scale: float = hyper(1.0, positive=True)
 
-    def __check_init__(self):
-        check_positive("ColumnTimesTorque", "scale", self.scale)
-        check_positive("ColumnTimesTorque", "torque_scale", self.torque_scale)
+    key, names = labels("column:{name}*torque", "({name}-{center})/{scale}*T/{torque_scale}")
 
-    @property
-    def key(self) -> str:
-        return f"column:{self.name}*torque"
-
-    def names(self) -> tuple[str, ...]:
-        return (f"({self.name}-{fmt(self.center)})/{fmt(self.scale)}*T/{fmt(self.torque_scale)}",)
-
-    def torque_slope(self, sig):
+    def torque_slope(self, sig: Signals) -> Samples:
         """$u(x)$ with $\\psi = u(x) T$."""
-        return (sig.get(self.name) - self.center) / (self.scale * self.torque_scale)
+        return self._slope(sig.get(self.name))
 
-    def numpy_torque_slope(self, sig) -> np.ndarray:
-        return (np.asarray(sig.get(self.name)) - self.center) / (self.scale * self.torque_scale)
+    def numpy_torque_slope(self, sig: Signals) -> Float[np.ndarray, " n"]:
+        return self._slope(np.asarray(sig.get(self.name)))
+
+    def _slope(self, x):
+        # the same arithmetic for JAX and NumPy arrays
+        return (x - self.center) / (self.scale * self.torque_scale)
 
 
 class Temperature(AbstractPlantEffect):
@@ -102,28 +87,17 @@ class Temperature(AbstractPlantEffect):
     initial: Float[Array, ""]
     alpha: Float[Array, ""]
     beta: Float[Array, ""]
-    time_constant: Float[Array, ""]
-    heating: Float[Array, ""]
+    time_constant: Float[Array, ""] = bound("positive", inverse=True)
+    heating: Float[Array, ""] = bound("nonneg")
     drift: Float[Array, ""]
 
-    def reciprocals(self):
-        return {"time_constant": 1.0 / self.time_constant}
-
-    def rate(self, temp, current, inv=None):
+    def rate(self, temp: Pointwise, current: Pointwise, inv: dict | None = None) -> PointwiseOut:
         inv = self.reciprocals() if inv is None else inv
         return (
             (self.ambient - temp) * inv["time_constant"]
             + self.heating * current * current
             + self.drift
         )
-
-
-def _build(name: str, p: dict) -> Temperature:
-    for f in ("reference", "ambient", "initial", "alpha", "beta", "drift"):
-        require(name, f, p[f], shape=())
-    require(name, "time_constant", p["time_constant"], positive=True, shape=())
-    require(name, "heating", p["heating"], nonneg=True, shape=())
-    return Temperature(**{k: f64(v) for k, v in p.items()})
 
 
 class ThermalFamily(AbstractFamily):
@@ -133,7 +107,7 @@ class ThermalFamily(AbstractFamily):
     name: ClassVar[str] = "thermal"
     terms: ClassVar[tuple] = (Column, ColumnTimesTorque)
     plant_effects: ClassVar[tuple] = (
-        PlantEffect(
+        Temperature.entry(
             "temperature",
             "temperature",
             lambda rated, k1, given: dict(
@@ -146,12 +120,10 @@ class ThermalFamily(AbstractFamily):
                 heating=3e-3,
                 drift=0.02,
             ),
-            _build,
         ),
     )
     discover_families: ClassVar[tuple] = ("column",)
     vocabulary: ClassVar[str] = "column:NAME, column:NAME*torque"
-    options: ClassVar[dict] = {}
 
     def candidates(self, ctx):
         if "column" not in ctx.families:
@@ -159,7 +131,7 @@ class ThermalFamily(AbstractFamily):
         out = []
         for name in ctx.extra_columns:
             x = np.asarray(ctx.sig.get(name))
-            center, scale = float(f"{x.mean():.6g}"), float(f"{x.std():.4g}")
+            center, scale = rounded(x.mean(), 6), rounded(x.std())
             if scale == 0.0:
                 continue
             t1 = Column(name=name, center=center, scale=scale)

@@ -11,92 +11,54 @@ References: Song et al. 2019, Section IV.C; Armstrong-Hélouvry et al., Automati
 
 from __future__ import annotations
 
+from types import ModuleType
 from typing import ClassVar
 
 import equinox as eqx
 
-from .._custom_types import Array, Float
-from ._base import (
-    AbstractFamily,
-    AbstractFriction,
-    AbstractSignalTerm,
-    Candidate,
-    PlantEffect,
-    check_positive,
-    f64,
-    fmt,
-    require,
-)
-from ._coulomb import velocity_rms
+from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, SamplesLike
+from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm
+from ._fields import bound, hyper, labels
+from ._friction import friction_effects, velocity_candidates
 
 
 class Viscous(AbstractSignalTerm):
     """Viscous friction signature: a velocity, divided by `scale`."""
 
     signal: str = eqx.field(default="omega_m", static=True)
-    scale: float = eqx.field(default=1.0, static=True)
+    scale: float = hyper(1.0, positive=True)
 
-    def __check_init__(self):
-        check_positive("Viscous", "scale", self.scale)
+    key, names = labels("viscous:{signal}", "{signal}/{scale}")
 
-    @property
-    def key(self) -> str:
-        return f"viscous:{self.signal}"
-
-    def names(self) -> tuple[str, ...]:
-        return (f"{self.signal}/{fmt(self.scale)}",)
-
-    @property
-    def signal_name(self) -> str:
-        return self.signal
-
-    def transform(self, x, xp):
+    def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         return x / self.scale
 
 
 class ViscousFriction(AbstractFriction):
     r"""Viscous friction $F_v \omega$ [N·m] (`coefficient` $F_v$)."""
 
-    coefficient: Float[Array, ""]
+    coefficient: Float[Array, ""] = bound("nonneg")
 
-    def reciprocals(self):
-        return {}
-
-    def __call__(self, omega, inv=None):
+    def __call__(self, omega: Pointwise, inv: dict | None = None) -> PointwiseOut:
         return self.coefficient * omega
 
-    def max_slope(self):
+    def max_slope(self) -> Float[Array, ""]:
         return self.coefficient
 
 
-def _build(name: str, p: dict) -> ViscousFriction:
-    require(name, "coefficient", p["coefficient"], nonneg=True, shape=())
-    return ViscousFriction(f64(p["coefficient"]))
-
-
 class ViscousFamily(AbstractFamily):
-    """Viscous friction: plant `viscous_m`, `viscous_l`; term `Viscous`; one candidate each."""
+    """Viscous friction: plant `viscous_m`, `viscous_l`; term `Viscous`; one candidate per
+    velocity, scaled by its RMS."""
 
     name: ClassVar[str] = "viscous"
     terms: ClassVar[tuple] = (Viscous,)
-    plant_effects: ClassVar[tuple] = (
-        PlantEffect(
-            "viscous_m", "motor_friction", lambda rated, k1, given: dict(coefficient=2.0e-4), _build
-        ),
-        PlantEffect(
-            "viscous_l", "output_friction", lambda rated, k1, given: dict(coefficient=2.0), _build
-        ),
+    plant_effects: ClassVar[tuple] = friction_effects(
+        "viscous",
+        ViscousFriction.from_params,
+        motor=lambda rated, k1, given: dict(coefficient=2.0e-4),
+        output=lambda rated, k1, given: dict(coefficient=2.0),
     )
     discover_families: ClassVar[tuple] = ("viscous:omega_m", "viscous:omega_l")
-    vocabulary: ClassVar[str] = "viscous:omega_m, viscous:omega_l"
-    options: ClassVar[dict] = {}
 
     def candidates(self, ctx):
-        out = []
-        for signal in ("omega_m", "omega_l"):
-            rms = velocity_rms(ctx.sig, signal)
-            if rms == 0.0 or not ctx.wants(f"viscous:{signal}"):
-                continue
-            term = Viscous(signal=signal, scale=float(f"{rms:.4g}"))
-            out.append(Candidate(term.key, term.key, term))
-        return out
+        return velocity_candidates(ctx, "viscous", Viscous, (1.0,))

@@ -13,35 +13,25 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, Float
+from .._custom_types import Array, Float, NumpyDesign, Pointwise, PointwiseOut, SamplesLike
 from .._errors import ConfigError
-from ._base import (
-    AbstractFamily,
-    AbstractPlantEffect,
-    AbstractTorqueFreeTerm,
-    PlantEffect,
-    check_positive,
-    concrete,
-    vector,
-)
+from .._features import Signals
+from ._base import AbstractColumnListTerm, AbstractFamily, AbstractPlantEffect, PlantEffect
+from ._fields import concrete, hyper
 
 
-class CurrentPolynomial(AbstractTorqueFreeTerm):
+class CurrentPolynomial(AbstractColumnListTerm):
     """Wave-generator deformation as a polynomial in current, eq. (8), without its constant.
 
     Columns $I, I^2, \\dots, I^p$; the fitted coefficient of $I^i$ is $\\omega_i / N$ (eq. (10)).
     `scale` divides the current first (the rated current, say) so high powers stay O(1).
     """
 
-    order: int = eqx.field(default=6, static=True)
-    scale: float = eqx.field(default=1.0, static=True)
-
-    def __check_init__(self):
-        check_positive("CurrentPolynomial", "scale", self.scale)
+    order: int = hyper(6)
+    scale: float = hyper(1.0, positive=True)
 
     @property
     def key(self) -> str:
@@ -50,17 +40,14 @@ class CurrentPolynomial(AbstractTorqueFreeTerm):
     def names(self) -> tuple[str, ...]:
         return tuple(f"w{i}" for i in range(1, self.order + 1))
 
-    def column_list(self, sig) -> list:
+    def column_list(self, sig: Signals) -> list[Float[Array, " n"]]:
         x = sig.current / self.scale
         out = [x]
         for _ in range(1, self.order):
             out.append(out[-1] * x)
         return out
 
-    def columns(self, sig, torque=None):
-        return jnp.stack(self.column_list(sig), axis=1)
-
-    def numpy_columns(self, sig, torque=None) -> np.ndarray:
+    def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         x = np.asarray(sig.current) / self.scale
         return np.column_stack([x ** (i + 1) for i in range(self.order)])
 
@@ -75,17 +62,14 @@ class WaveGenerator(AbstractPlantEffect):
 
     coefficients: Float[Array, " m"]
 
-    def reciprocals(self):
-        return {}
-
-    def deflection(self, u, inv=None):
+    def deflection(self, u: Pointwise, inv: dict | None = None) -> PointwiseOut:
         # Horner: u * (w1 + u * (w2 + ...)), exact and NaN-free at u = 0
         acc = jnp.zeros_like(u)
         for j in range(self.coefficients.shape[0] - 1, -1, -1):
             acc = acc * u + self.coefficients[j]
         return acc * u
 
-    def slope(self, u, inv=None):
+    def slope(self, u: Pointwise, inv: dict | None = None) -> PointwiseOut:
         acc = jnp.zeros_like(u)
         for j in range(self.coefficients.shape[0] - 1, -1, -1):
             acc = acc * u + (j + 1.0) * self.coefficients[j]
@@ -93,14 +77,14 @@ class WaveGenerator(AbstractPlantEffect):
 
 
 def _build(name: str, p: dict) -> WaveGenerator:
-    w = vector(name, "coefficients", p["coefficients"])
-    arr = concrete(w)
+    wg = WaveGenerator.from_params(name, p)
+    arr = concrete(wg.coefficients)
     if arr is not None and (arr.shape[0] < 1 or arr[0] <= 0):
         raise ConfigError(
             "effect 'wg_compliance': the linear coefficient w_1 must be positive (the wave "
             f"generator deflects with its torque), got coefficients {arr.tolist()}"
         )
-    return WaveGenerator(w)
+    return wg
 
 
 WG_COMPLIANCE = "wg_compliance"
@@ -108,7 +92,8 @@ WG_COMPLIANCE = "wg_compliance"
 
 
 class WaveGeneratorFamily(AbstractFamily):
-    """Wave-generator compliance: plant `wg_compliance`, base term `CurrentPolynomial`."""
+    """Wave-generator compliance: plant `wg_compliance`, base term `CurrentPolynomial` (part of
+    every paper model, so never proposed by the residual loop)."""
 
     name: ClassVar[str] = "wave_generator"
     terms: ClassVar[tuple] = (CurrentPolynomial,)
@@ -120,9 +105,6 @@ class WaveGeneratorFamily(AbstractFamily):
             _build,
         ),
     )
-    discover_families: ClassVar[tuple] = ()
-    vocabulary: ClassVar[str] = ""
-    options: ClassVar[dict] = {}
 
     def candidates(self, ctx):
         return []

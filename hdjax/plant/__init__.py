@@ -39,6 +39,7 @@ from ._scenarios import (
     scenario_drive as scenario_drive,
     simulate_scenario as simulate_scenario,
     simulate_scenarios as simulate_scenarios,
+    swing_drive as swing_drive,
 )
 from ._sensors import SensorConfig as SensorConfig
 from ._simulate import (

@@ -24,7 +24,8 @@ from __future__ import annotations
 
 from .. import effects
 from .._errors import ConfigError, did_you_mean
-from ..effects._base import check_slot, concrete as _concrete
+from ..effects._base import check_slot
+from ..effects._fields import concrete as _concrete
 
 __all__ = ["EFFECT_NAMES", "check_effect_name", "make_effect", "_concrete"]
 

@@ -8,6 +8,7 @@ Switchable effects live in the `effects` dict (name -> effect module, see
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Mapping
 
 import equinox as eqx
@@ -23,25 +24,17 @@ _f64 = lambda x: jnp.asarray(x, jnp.float64)
 
 FLEXSPLINE_KINDS = ("piecewise", "smooth")
 
-_SCALARS = (
-    "ratio",
-    "rated_torque",
-    "inertia_m",
-    "inertia_l",
-    "torque_constant",
-    "current_time_constant",
-    "damping",
-    "corner",
-)
-_POSITIVE = (
-    "ratio",
-    "rated_torque",
-    "inertia_m",
-    "inertia_l",
-    "torque_constant",
-    "current_time_constant",
-    "corner",
-)
+_SCALARS = {
+    "ratio": "positive",
+    "rated_torque": "positive",
+    "inertia_m": "positive",
+    "inertia_l": "positive",
+    "torque_constant": "positive",
+    "current_time_constant": "positive",
+    "damping": "nonneg",
+    "corner": "positive",
+}
+"""The scalar parameters and their sign: positive, or non-negative (a joint may be undamped)."""
 
 
 class PlantParams(eqx.Module):
@@ -81,7 +74,7 @@ class PlantParams(eqx.Module):
     newton_iterations: int = eqx.field(static=True, default=3)
 
     def __check_init__(self):
-        for name in _SCALARS:
+        for name, sign in _SCALARS.items():
             arr = _concrete(getattr(self, name))
             if arr is None:
                 continue
@@ -91,10 +84,10 @@ class PlantParams(eqx.Module):
                 )
             if not np.isfinite(arr):
                 raise ConfigError(f"plant parameter {name!r} must be finite, got {float(arr)}")
-            if name in _POSITIVE and not arr > 0:
+            if sign == "positive" and not arr > 0:
                 raise ConfigError(f"plant parameter {name!r} must be positive, got {float(arr)}")
-            if name == "damping" and arr < 0:
-                raise ConfigError(f"plant parameter 'damping' must be >= 0, got {float(arr)}")
+            if sign == "nonneg" and arr < 0:
+                raise ConfigError(f"plant parameter {name!r} must be >= 0, got {float(arr)}")
         k = _concrete(self.compliance)
         if k is not None:
             if k.shape != (5,):
@@ -249,21 +242,18 @@ def song_params(effects: Mapping | None = None, *, defaults: bool = True, **kwar
 
     **Returns:** `PlantParams`.
     """
-    base = dict(
+    return _from_preset(
+        kwargs,
+        {name: True for name in SONG_DEFAULT_EFFECTS} if defaults else {},
+        effects,
         ratio=160.0,
         rated_torque=400.0,
         inertia_m=1.5e-4,
         inertia_l=1.0,
         torque_constant=0.25,
-        current_time_constant=1.0 / (2.0 * np.pi * 1000.0),
         compliance=SONG_COMPLIANCE,
         damping=20.0,
     )
-    _check_overrides(kwargs, base)
-    base.update(kwargs)
-    spec = {name: True for name in SONG_DEFAULT_EFFECTS} if defaults else {}
-    spec.update(effects or {})
-    return make_params(**base, effects=spec)
 
 
 def hashimoto_params(effects: Mapping | None = None, **kwargs) -> PlantParams:
@@ -283,23 +273,28 @@ def hashimoto_params(effects: Mapping | None = None, **kwargs) -> PlantParams:
 
     **Returns:** `PlantParams`.
     """
-    base = dict(
+    return _from_preset(
+        kwargs,
+        {"coulomb_m": {"level": 0.04, "smoothing": 0.2}},
+        effects,
         ratio=100.0,
         rated_torque=40.0,
         inertia_m=9.4e-5,
         inertia_l=0.88,
         torque_constant=0.1,
-        current_time_constant=1.0 / (2.0 * np.pi * 1000.0),
         compliance=np.full(5, 1.0 / 8800.0),
         damping=0.0,
     )
-    _check_overrides(kwargs, base)
-    base.update(kwargs)
-    spec = {"coulomb_m": {"level": 0.04, "smoothing": 0.2}}
-    spec.update(effects or {})
-    return make_params(**base, effects=spec)
 
 
-def _check_overrides(kwargs, base):
-    allowed = tuple(base) + ("corner", "flexspline", "newton_iterations")
-    check_keys(kwargs, allowed, noun="plant parameter")
+CURRENT_LOOP_TIME_CONSTANT = 1.0 / (2.0 * np.pi * 1000.0)
+"""The current loop of both presets [s]: 1 kHz, a typical servo driver's (an assumption)."""
+
+
+def _from_preset(overrides: dict, on: dict, effects: Mapping | None, **preset) -> PlantParams:
+    # a preset's parameters with the user's overrides (refusing unknown names), its effects
+    # `on` with the user's `effects` on top
+    allowed = [k for k in inspect.signature(make_params).parameters if k != "effects"]
+    check_keys(overrides, allowed, noun="plant parameter")
+    scalars = {"current_time_constant": CURRENT_LOOP_TIME_CONSTANT, **preset, **overrides}
+    return make_params(**scalars, effects={**on, **(effects or {})})

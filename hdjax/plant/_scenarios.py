@@ -75,20 +75,7 @@ def scenario_drive(name: str, params: PlantParams, *, duration: float, dt: float
     gravity = np.zeros(n)
     external = np.zeros(n)
     if name == "slow":
-        period, amp = 20.0, 1.4
-        w = 2.0 * math.pi / period
-        theta = math.pi / 2 - amp * np.cos(w * t)
-        omega = amp * w * np.sin(w * t)
-        alpha = amp * w * w * np.cos(w * t)
-        # arm length cycles 0.5, 0.75, 1.0 of the longest; the rope is moved over 2 s at the
-        # start of each period (while the load is at its largest, as when re-hanging weights)
-        arms = np.array([0.5, 0.75, 1.0])
-        k = np.floor(t / period).astype(int)
-        frac = arms[k % 3]
-        prev = arms[(k - 1) % 3]
-        blend = _smoothstep((t - k * period) / 2.0)
-        arm = np.where(k == 0, frac, prev + (frac - prev) * blend)
-        gravity = -0.95 * rated * arm
+        theta, omega, alpha, gravity = _swing(t, rated, amplitude=1.4, period=20.0, rope_time=2.0)
     elif name == "fast":
         theta, omega, alpha = _hold(n)
         seed = int(jax.random.randint(key, (), 0, 2**31 - 1))
@@ -116,6 +103,55 @@ def scenario_drive(name: str, params: PlantParams, *, duration: float, dt: float
         gravity = -0.95 * rated * frac
     f = lambda x: jnp.asarray(x, jnp.float64)
     return Drive(f(theta), f(omega), f(alpha), f(gravity), f(external))
+
+
+def _swing(t, rated: float, *, amplitude: float, period: float, rope_time: float):
+    # the link follows pi/2 - A cos(w t); the arm length cycles 0.5, 0.75, 1.0 of the longest,
+    # the rope moved over `rope_time` at the start of each period (while the load is at its
+    # largest, as when re-hanging weights)
+    w = 2.0 * math.pi / period
+    theta = math.pi / 2 - amplitude * np.cos(w * t)
+    omega = amplitude * w * np.sin(w * t)
+    alpha = amplitude * w * w * np.cos(w * t)
+    arms = np.array([0.5, 0.75, 1.0])
+    k = np.floor(t / period).astype(int)
+    frac = arms[k % 3]
+    prev = arms[(k - 1) % 3]
+    blend = _smoothstep((t - k * period) / rope_time)
+    arm = np.where(k == 0, frac, prev + (frac - prev) * blend)
+    return theta, omega, alpha, -0.95 * rated * arm
+
+
+def swing_drive(
+    params: PlantParams,
+    *,
+    amplitude: float,
+    period: float,
+    duration: float,
+    dt: float,
+    rope_time: float = 2.0,
+) -> Drive:
+    r"""The `slow` scenario's drive with a swing of its own.
+
+    The link follows $\pi/2 - A\cos(2\pi t/P)$ under weights at arm lengths that change once
+    per period (0.5, 0.75, 1.0 of the longest, loads up to 0.95 of the rated torque), so the
+    gravity load is a smooth function of the output angle times a slowly changing arm; `slow`
+    is $A$ = 1.4 rad, $P$ = 20 s.
+
+    **Arguments:** `params` (its `rated_torque` scales the loads), `amplitude` $A$ [rad],
+    `period` $P$ [s], `duration` [s], `dt` the integration step [s], `rope_time` the time [s]
+    over which the arm changes at the start of each period.
+
+    **Returns:** a [`hdjax.plant.Drive`][].
+    """
+    rated = float(np.asarray(_concrete(params.rated_torque)))
+    n = int(round(duration / dt))
+    t = np.arange(n) * dt
+    theta, omega, alpha, gravity = _swing(
+        t, rated, amplitude=amplitude, period=period, rope_time=rope_time
+    )
+    f = lambda x: jnp.asarray(x, jnp.float64)
+    return Drive(f(theta), f(omega), f(alpha), f(gravity), f(np.zeros(n)))
 
 
 def _check_name(name):
