@@ -114,3 +114,18 @@ def test_fold_solver_equals_lstsq_on_the_training_rows(seed):
         got = solver.solve(te)
         assert got[~active].tolist() == [0.0] * int((~active).sum())
         np.testing.assert_allclose(a @ got, a @ ref, rtol=0, atol=1e-7 * np.abs(y).max())
+
+
+def test_usable_check_equals_the_whole_array_check():
+    from hdjax.discover._loop import _usable
+
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((500, 2))
+    cases = [x, x[:, :1], np.ones((500, 2)), np.column_stack([np.ones(500), x[:, 0]])]
+    for bad in (np.nan, np.inf, -np.inf):
+        y = x.copy()
+        y[123, 1] = bad
+        cases.append(y)
+    for c in cases:
+        # the former check: all finite, and some column not constant
+        assert _usable(c) == bool(np.isfinite(c).all() and np.ptp(c, axis=0).max() > 0)

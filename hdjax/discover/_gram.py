@@ -183,9 +183,9 @@ def _batch_statistics(a, yt, groups, bounds, chunks, project):
 
     proj = None
     if project is not None:
-        ar = np.zeros((p, c_total))
-        for b, e in chunks:
-            ar += a[bounds[b] : bounds[e]].T @ stacked(bounds[b], bounds[e])
+        ar = np.empty((p, c_total))
+        for i, g in enumerate(groups):
+            ar[:, offsets[i] : offsets[i + 1]] = a.T @ g
         proj = project(ar)
     ab = np.zeros((n_blocks, p + 1, c_total))
     cc = {w: np.zeros((n_blocks, len(idx), w, w)) for w, idx in by_width.items()}
