@@ -94,6 +94,33 @@ MIN_PERIOD_FRACTION = 1.0 / 3.0
 """The least share of a period that a named (grid) order's swing must cover to be offered."""
 
 
+MAX_GAP_PHASE = math.pi / 2
+"""The most phase ($K$ times the angle) that TRAIN's widest gap in an angle may span for order
+$K$ of that angle to be offered, unless the record covers `GAP_EXEMPT_PERIODS` of its periods."""
+
+GAP_EXEMPT_PERIODS = 10.0
+"""Periods of an order inside the angle's span above which its gaps are bridged by periodicity
+(the order is seen on many periods either side of every gap, and cross-validation tests that)."""
+
+
+def widest_gap(theta) -> float:
+    """The widest angle interval inside the span that holds no sample [rad]."""
+    a = np.sort(np.asarray(theta, np.float64))
+    return float(np.max(np.diff(a))) if a.size > 1 else 0.0
+
+
+def bridges_gaps(order: float, span: float, gap: float) -> bool:
+    """Whether order `order` of an angle is determined across its widest gap `gap`.
+
+    Over a record that covers the order only a few times (a partial swing of the output), a
+    harmonic is a smooth function of the angle fitted to the samples that exist: inside a gap
+    wider than a quarter of its period it swings freely (a split into long time blocks of a
+    one-way sweep leaves whole angle ranges to TEST). Offered only if the gap spans at most
+    `MAX_GAP_PHASE` of its phase, or the span holds `GAP_EXEMPT_PERIODS` periods.
+    """
+    return order * gap <= MAX_GAP_PHASE or order * span >= 2.0 * math.pi * GAP_EXEMPT_PERIODS
+
+
 def min_resolvable_order(theta) -> float:
     """The lowest order with at least one full period inside the angle's span."""
     span = float(np.ptp(np.asarray(theta)))
@@ -118,8 +145,9 @@ def spectrum_orders(
     a once-per-revolution error over a ±90° swing is a smooth bump that cross-validation weighs
     against the smooth terms (torque polynomial, Coulomb, the compliance of a gravity-like
     load). Orders within half a resolution of one already in the model (`existing`) are left
-    out. Returns `[(order, origin)]` (origin `"spectrum"` or `"grid"`) and the spectrum (None
-    when the record resolves no order in the range).
+    out, and so are orders that TRAIN's widest angle gap leaves undetermined
+    ([`bridges_gaps`][]). Returns `[(order, origin)]` (origin `"spectrum"` or `"grid"`) and the
+    spectrum (None when the record resolves no order in the range).
     """
     full = min_resolvable_order(theta)
     lowest = max(order_range[0], full)
@@ -144,8 +172,11 @@ def spectrum_orders(
                 k = m
         orders.append((k, "spectrum"))
     orders += [(k, "grid") for k in named]
+    span, gap = float(np.ptp(np.asarray(theta))), widest_gap(theta)
     out, seen = [], []
     for k, origin in orders:
+        if not bridges_gaps(k, span, gap):
+            continue  # TRAIN leaves a gap this order is not determined across
         if any(abs(k - e) < res / 2 for e in existing):
             continue  # already in the model
         if any(abs(k - s) < 1e-6 for s in seen):

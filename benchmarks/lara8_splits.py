@@ -1,0 +1,137 @@
+"""LARA8 joint 3 under three TRAIN/TEST splits: what the residual loop finds, and why it differs.
+
+The log (`validate.csv`) is one slow one-way sweep of joint 3 (about -149 to +149 degrees in
+7.35 s), so the angle and the torque are both functions of time. A split by time blocks decides
+how far each TEST sample lies from the nearest TRAIN sample in angle and torque: short blocks
+interleave (TEST lies between TRAIN samples), long blocks leave whole angle ranges to TEST alone.
+For each split this prints, as JSON:
+
+- the effects the loop adds, TEST RMS start -> end, the reduction, each step's stability and
+  cross-validated torque RMS;
+- the coverage of TEST by TRAIN: the largest and the median distance [deg] from a TEST sample to
+  the nearest TRAIN output angle, and the share of TEST samples whose torque lies outside TRAIN's
+  range;
+- a cross-refit: each split's effect set (its terms as found) refitted on every split, TEST RMS,
+  so the difference between the splits' answers can be told apart from a difference in what
+  each split's data can show.
+
+    python benchmarks/lara8_splits.py [--out benchmarks/out/lara8_splits.json]
+"""
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+
+from hdjax import HdjaxError  # noqa: E402
+from hdjax.discover import DiscoverOptions, discover, refit_structure  # noqa: E402
+
+CONFIG = ROOT / "experiments" / "lara8_discover.toml"
+
+
+def load():
+    """The joint-3 recording, the joint and the discover settings of `experiments/`."""
+    from hdjax._io import ColumnMap, load_recording, read_toml
+    from hdjax.discover._config import load_discover_config
+
+    _, _, joint, cfg, _ = load_discover_config(CONFIG)
+    data = read_toml(CONFIG)["data"]
+    colmap = ColumnMap.from_dict({k: data[k] for k in ("columns", "extras") if k in data})
+    full = load_recording(CONFIG.parent / data["path"], colmap)
+    return full, joint, DiscoverOptions(max_effects=int(cfg.get("max_effects", 5)))
+
+
+def splits(full) -> dict[str, np.ndarray]:
+    """TEST masks of the three splits."""
+    t = np.asarray(full.t) - float(np.asarray(full.t)[0])
+    idx = np.arange(full.n_samples) // 100
+    return {
+        "alternating 0.5 s blocks": np.floor(t / 0.5).astype(int) % 2 == 1,
+        "alternating 2 s blocks": np.floor(t / 2.0).astype(int) % 2 == 1,
+        "every 4th block of 100 samples": idx % 4 == 3,
+    }
+
+
+def coverage(train, test) -> dict:
+    """How far TEST lies from TRAIN in output angle and torque."""
+    a_tr = np.sort(np.asarray(train.theta_l))
+    a_te = np.asarray(test.theta_l)
+    pos = np.clip(np.searchsorted(a_tr, a_te), 1, a_tr.size - 1)
+    gap = np.minimum(np.abs(a_te - a_tr[pos - 1]), np.abs(a_te - a_tr[pos]))
+    tq_tr, tq_te = np.asarray(train.torque), np.asarray(test.torque)
+    outside = (tq_te < tq_tr.min()) | (tq_te > tq_tr.max())
+    return dict(
+        test_angle_gap_max_deg=float(np.degrees(gap.max())),
+        test_angle_gap_median_deg=float(np.degrees(np.median(gap))),
+        test_torque_outside_train_share=float(outside.mean()),
+        train_torque_range_nm=[float(tq_tr.min()), float(tq_tr.max())],
+        test_torque_range_nm=[float(tq_te.min()), float(tq_te.max())],
+    )
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "lara8_splits.json")
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    full, joint, opts = load()
+    parts = {name: (full.select(~m), full.select(m)) for name, m in splits(full).items()}
+    rows, terms = [], {}
+    for name, (train, test) in parts.items():
+        res = discover(train, test, joint, opts)
+        rec = res.aux
+        terms[name] = list(res.value.effect_terms)
+        row = dict(
+            split=name,
+            train_samples=train.n_samples,
+            test_samples=test.n_samples,
+            effects=rec.effects,
+            test_rms_start=rec.baseline.rms,
+            test_rms_end=rec.final.rms,
+            reduction=1.0 - rec.final.rms / rec.baseline.rms,
+            stability=[s.stability for s in rec.steps],
+            cv_torque_rms=[rec.baseline_cv_torque_rms] + [s.cv_torque_rms for s in rec.steps],
+            **coverage(train, test),
+        )
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    # every split's effect set refitted on every split (TEST RMS [N·m])
+    cross = {}
+    for found, tl in terms.items():
+        cross[found] = {}
+        for name, (train, test) in parts.items():
+            try:
+                cross[found][name] = float(refit_structure(train, test, joint, tl, opts).rms)
+            except HdjaxError as err:  # e.g. a compliance that is not invertible on this TRAIN
+                cross[found][name] = f"refused: {err}"
+    out = dict(
+        benchmark="LARA8 joint 3, three splits",
+        date=datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        machine=platform.processor() or platform.machine(),
+        cpu_count=os.cpu_count(),
+        load_average=os.getloadavg()[0],
+        precision="float64",
+        splits=rows,
+        cross_refit_test_rms=cross,
+        seconds=time.perf_counter() - t0,
+    )
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(out, indent=2))
+    print(json.dumps(dict(cross_refit_test_rms=cross, seconds=out["seconds"])))
+
+
+if __name__ == "__main__":
+    main()
