@@ -364,7 +364,8 @@ def score_candidates(
         sig, torque = training_data(model, data, est)
         a_full = design(model, sig, torque)
         active = np.asarray(model.active)
-        a = a_full if active.all() else a_full[:, active]
+        # np.compress copies the active columns several times faster than a[:, active]
+        a = a_full if active.all() else np.compress(active, a_full, axis=1)
         y = np.asarray(sig.twist)
         resid = y - a_full @ np.asarray(model.coef)
         del a_full

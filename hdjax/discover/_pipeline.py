@@ -228,10 +228,12 @@ class FoldSolver:
         rows `te`."""
         a, y, act = self.a, self.y, self.active
         coef = np.zeros(a.shape[1])
-        at = a[te][:, act]
+        # one gather of rows and columns (indexing the columns of a row copy is ~8x slower)
+        at = a[np.ix_(te, act)]
         keep = (self.nonzero - np.count_nonzero(at, axis=0)) > 0
         idx = act[keep]
-        at = at[:, keep]
+        if not keep.all():
+            at = np.compress(keep, at, axis=1)
         g = self.g[np.ix_(keep, keep)] - at.T @ at
         aty = self.aty[keep] - at.T @ y[te]
         d = np.sqrt(np.maximum(np.diag(g), 0.0))
