@@ -1,7 +1,11 @@
 """Shape-annotated array aliases shared across hdjax."""
 
+import os
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
-from jaxtyping import Array, ArrayLike, Bool, Float, Int, PRNGKeyArray, Real, Shaped
+from jaxtyping import Array, ArrayLike, Bool, Float, Int, PRNGKeyArray, PyTree, Real, Shaped
 
 Samples = Float[Array, " n"]
 """A float64 signal with one value per sample."""
@@ -27,13 +31,23 @@ Scalar = Real[ArrayLike, ""]
 """A real number: a Python int or float, or a 0-d array (a module field that JAX may trace, as
 under `vmap` or `grad`)."""
 
+ArrayInput = Shaped[ArrayLike, " ..."] | Sequence[Any]
+"""An array as a user gives it, before validation (an array, or a list of numbers or of rows):
+the function that takes it checks dtype, shape and finiteness itself and says what is wrong."""
+
+PathLike = str | os.PathLike[str]
+"""A file or folder path."""
+
 __all__ = [
+    "ArrayInput",
+    "PathLike",
     "Array",
     "ArrayLike",
     "Bool",
     "Float",
     "Int",
     "PRNGKeyArray",
+    "PyTree",
     "Real",
     "Shaped",
     "Samples",

@@ -9,6 +9,7 @@ network's features, the hybrid and joint fits and the residual loop all start fr
 from __future__ import annotations
 
 import typing
+from collections.abc import Iterable
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -54,7 +55,7 @@ def _backward_difference(t, theta):
 
 
 def finite_difference_velocity(
-    t: Float[ArrayLike, ...], theta: Float[ArrayLike, ...]
+    t: Float[ArrayLike, " ..."], theta: Float[ArrayLike, " ..."]
 ) -> Float[Array, " n"]:
     r"""Angular velocity by the paper's backward difference, Song et al. eqs. (13)-(14).
 
@@ -90,7 +91,7 @@ def _local_slope(t, theta, half_window: int):
 
 
 def smoothed_velocity(
-    t: Float[ArrayLike, ...], theta: Float[ArrayLike, ...], half_window: int = 5
+    t: Float[ArrayLike, " ..."], theta: Float[ArrayLike, " ..."], half_window: int = 5
 ) -> Float[Array, " n"]:
     """Angular velocity by a local least-squares line over `2*half_window+1` samples.
 
@@ -159,7 +160,7 @@ class Signals(eqx.Module):
         return find_gaps(self.t, factor)
 
     @classmethod
-    def concatenate(cls, parts) -> Signals:
+    def concatenate(cls, parts: Iterable[Signals]) -> Signals:
         """Several signals one after the other (velocities stay per part; the time stamps
         restart, which [`gaps`][] reports)."""
         parts = list(parts)

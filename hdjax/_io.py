@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._custom_types import ArrayLike, Float
+from ._custom_types import ArrayLike, Float, PathLike
 from ._errors import ConfigError, DataError, check_keys, did_you_mean as did_you_mean
 from ._recording import SIGNAL_COLUMNS, Recording, make_recording
 
@@ -399,7 +399,9 @@ def _build(
     )
 
 
-def load_csv(path, columns: ColumnMap | None = None, *, check_units: bool = True) -> Recording:
+def load_csv(
+    path: PathLike, columns: ColumnMap | None = None, *, check_units: bool = True
+) -> Recording:
     """Load a [`hdjax.Recording`][] from a CSV file with a header row.
 
     Without `columns` the header must name `t, theta_m, theta_l, current` (and optionally
@@ -412,7 +414,9 @@ def load_csv(path, columns: ColumnMap | None = None, *, check_units: bool = True
     return _build(table, columns, str(path), check_units)
 
 
-def load_npz(path, columns: ColumnMap | None = None, *, check_units: bool = True) -> Recording:
+def load_npz(
+    path: PathLike, columns: ColumnMap | None = None, *, check_units: bool = True
+) -> Recording:
     """Load a [`hdjax.Recording`][] from a `.npz` archive holding one array per column."""
     path = Path(path)
     if not path.exists():
@@ -429,7 +433,9 @@ def load_npz(path, columns: ColumnMap | None = None, *, check_units: bool = True
     return _build(table, columns, str(path), check_units)
 
 
-def load_recording(path, columns: ColumnMap | None = None, *, check_units: bool = True):
+def load_recording(
+    path: PathLike, columns: ColumnMap | None = None, *, check_units: bool = True
+) -> Recording:
     """Load a recording chosen by the file's suffix: `.csv`, `.npz`, or a format of
     `hdjax._formats` (Parquet, HDF5 / MATLAB v7.3, MCAP)."""
     if Path(path).is_dir():
@@ -498,12 +504,12 @@ def csv_bytes(columns: dict[str, Float[ArrayLike, " n"]]) -> bytes:
     return buf.getvalue().encode()
 
 
-def save_csv(recording: Recording, path) -> None:
+def save_csv(recording: Recording, path: PathLike) -> None:
     """Write a recording as CSV (all columns, full float64 precision), atomically."""
     atomic_write_bytes(path, csv_bytes(recording.to_numpy()))
 
 
-def save_npz(recording: Recording, path) -> None:
+def save_npz(recording: Recording, path: PathLike) -> None:
     """Write a recording as `.npz`, atomically."""
     import io
 

@@ -7,6 +7,7 @@ import math
 from collections.abc import Mapping
 from pathlib import Path
 
+from ._custom_types import PathLike
 from ._errors import ConfigError, check_keys
 from ._io import read_toml
 
@@ -76,7 +77,7 @@ def _check_positive(key: str, value) -> None:
         raise ConfigError(f"[joint] {key} must be a positive finite number, got {value!r}")
 
 
-def load_joint(path) -> Joint:
+def load_joint(path: PathLike) -> Joint:
     """Read a [`hdjax.Joint`][] from the `[joint]` table of a TOML file."""
     path = Path(path)
     doc = read_toml(path)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -31,10 +32,10 @@ class ErrorMetrics(NamedTuple):
 
 
 def error_metrics(
-    estimate: Float[ArrayLike, ...],
-    reference: Float[ArrayLike, ...],
+    estimate: Float[ArrayLike, " ..."],
+    reference: Float[ArrayLike, " ..."],
     rated_torque: float,
-    mask: Bool[ArrayLike, ...] | None = None,
+    mask: Bool[ArrayLike, " ..."] | Sequence[bool] | None = None,
 ) -> ErrorMetrics:
     """RMS, maximum and percentage errors of `estimate` against `reference`.
 

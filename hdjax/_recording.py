@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ._custom_types import Array, Float
+from ._custom_types import Array, ArrayInput, ArrayLike, Bool, Float, Int, Real
 from ._errors import DataError, UnitWarning
 
 CORE_COLUMNS = ("t", "theta_m", "theta_l", "current")
@@ -98,7 +98,9 @@ class Recording(eqx.Module):
             f"{', '.join(self.column_names)}"
         )
 
-    def select(self, index) -> Recording:
+    def select(
+        self, index: slice | Int[ArrayLike, " m"] | Bool[ArrayLike, " n"] | Sequence[int]
+    ) -> Recording:
         """Rows selected by a slice, an integer index array or a boolean mask (outside jit)."""
         pick = lambda x: None if x is None else jnp.asarray(np.asarray(x)[index])
         return Recording(
@@ -122,19 +124,19 @@ class Recording(eqx.Module):
             )
         return self.select(slice(0, k)), self.select(slice(k, None))
 
-    def with_torque(self, torque) -> Recording:
+    def with_torque(self, torque: Real[ArrayLike, " n"]) -> Recording:
         """The same recording with another reference torque."""
         return eqx.tree_at(
             lambda r: r.torque, self, jnp.asarray(torque, jnp.float64), is_leaf=lambda x: x is None
         )
 
-    def with_extras(self, **columns) -> Recording:
+    def with_extras(self, **columns: Real[ArrayLike, " n"]) -> Recording:
         """The same recording with extra columns added or replaced."""
         extras = dict(self.extras)
         extras.update({k: jnp.asarray(v, jnp.float64) for k, v in columns.items()})
         return eqx.tree_at(lambda r: r.extras, self, extras)
 
-    def to_numpy(self) -> dict[str, np.ndarray]:
+    def to_numpy(self) -> dict[str, Float[np.ndarray, " n"]]:
         """All columns as float64 NumPy arrays, in `column_names` order."""
         return {name: np.asarray(self.column(name), dtype=np.float64) for name in self.column_names}
 
@@ -159,12 +161,12 @@ def _as_column(name: str, values, source: str) -> np.ndarray:
 
 
 def make_recording(
-    t,
-    theta_m,
-    theta_l,
-    current,
-    torque=None,
-    extras: Mapping[str, object] | None = None,
+    t: ArrayInput,
+    theta_m: ArrayInput,
+    theta_l: ArrayInput,
+    current: ArrayInput,
+    torque: ArrayInput | None = None,
+    extras: Mapping[str, ArrayInput] | None = None,
     *,
     source: str = "<memory>",
     check_units: bool = True,

@@ -36,3 +36,47 @@ def lara8_dir() -> Path:
     if not (LARA8 / "validate.csv").exists():
         pytest.skip(f"real LARA8 logs not found at {LARA8} (../shared beside the repo)")
     return LARA8
+
+
+# -- xdist: whole files per worker, the slowest first -------------------------------------------
+# `pytest -n 2` hands tests out one by one by default, so the two workers both run part of a
+# file and both pay for its module fixtures and its compilations (most of this suite's time is
+# XLA compiling programs that the tests of one file share). Here a worker takes whole files, the
+# known slow ones first (longest-processing-time order keeps the two workers' totals level; the
+# small files at the end fill the gaps). `HDJAX_TEST_DIST=load` restores xdist's default, to
+# compare. The weights are rough seconds on a 2-core machine; an unlisted file counts as 1 s per
+# test.
+SLOW_FILES = {
+    "test_discover_plant.py": 150,
+    "test_discover_trust.py": 120,
+    "test_discover_partial_swing.py": 45,
+    "test_discover_families.py": 40,
+    "test_readme.py": 35,
+    "test_discover_loop.py": 35,
+    "test_lara8_reference.py": 25,
+    "test_plant_simulate.py": 25,
+    "test_fleet.py": 17,
+}
+
+
+@pytest.hookimpl(optionalhook=True, tryfirst=True)
+def pytest_xdist_make_scheduler(config, log):
+    if os.environ.get("HDJAX_TEST_DIST", "file") != "file":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class SlowFilesFirst(LoadFileScheduling):
+        def _assign_work_unit(self, node):
+            if not getattr(self, "_ordered", False):
+                self._ordered = True
+
+                def cost(item):
+                    scope, tests = item
+                    return SLOW_FILES.get(Path(scope).name, len(tests))
+
+                ordered = sorted(self.workqueue.items(), key=cost, reverse=True)
+                self.workqueue.clear()
+                self.workqueue.update(ordered)
+            super()._assign_work_unit(node)
+
+    return SlowFilesFirst(config, log)

@@ -4,10 +4,10 @@ import json
 
 import numpy as np
 
-from hdjax import Joint
+from hdjax import RESULTS, Joint
 from hdjax.cli import main
 from hdjax.compliance import ComplianceModel, calibrate_lstsq, estimate_torque_arrays
-from hdjax.compliance._nested import batched_estimates, nested_fit
+from hdjax.compliance._nested import batched_estimates, estimable, member_message, nested_fit
 from hdjax.config import synthetic_recording
 from hdjax.pipelines._paper import stacked_signals
 
@@ -51,11 +51,30 @@ def test_nested_members_equal_separate_fits():
     torques = batched_estimates(big, fits, test_sig)
     for p, fit, tq in zip(orders, fits, torques):
         ref = calibrate_lstsq(make(p), (sig, torque)).value
-        assert fit.model.active == ref.active
-        c, r = np.asarray(fit.model.coef), np.asarray(ref.coef)
+        assert fit.value.active == ref.active and fit.ok
+        c, r = np.asarray(fit.value.coef), np.asarray(ref.coef)
         assert np.max(np.abs(c - r)) <= 1e-8 * np.max(np.abs(r))
         own = np.asarray(estimate_torque_arrays(ref, test_sig))
         np.testing.assert_allclose(tq, own, rtol=1e-7, atol=1e-9)
+
+
+def test_a_reversed_twist_is_a_result_code_not_free_text():
+    """A joint whose encoders count against the torque (the model's twist_sign disagrees with
+    the data's) calibrates a negative compliance in every segment: each member's result is
+    RESULTS.twist_reversed, its message names the segments, and it gets no held-out estimate."""
+    train = synthetic_recording(JOINT, 2000, seed=3)
+    flipped = Joint(ratio=160.0, rated_torque=400.0, twist_sign=-1.0)
+    make = lambda p: ComplianceModel.paper(
+        flipped, poly_order=p, current_scale=12.0, kinematic="none", per_segment=False
+    )
+    big = make(3)
+    sig, torque = stacked_signals(big, [train])
+    fits, _ = nested_fit(big, [make(1), make(3)], sig, torque)
+    assert [f.result for f in fits] == [RESULTS.twist_reversed] * 2
+    assert not any(estimable(f) for f in fits)
+    assert all("cannot be inverted" in member_message(f) for f in fits)
+    assert all(f.stats["n_terms"] == f.stats["rank"] for f in fits)
+    assert batched_estimates(big, fits, sig) == [None, None]
 
 
 def test_knee_is_the_true_polynomial_order(tmp_path):

@@ -11,6 +11,7 @@ motor's, and for hysteresis, whose loading direction there is not the direction 
 Each recording is 30 s at 2 ms; TRAIN and TEST come from different seeds.
 """
 
+import functools
 import math
 
 import jax
@@ -118,25 +119,25 @@ CASES = {
 }
 
 
-@pytest.fixture(scope="module")
-def data():
-    out = {}
-    for name, (scenario, effects, overrides, _, _) in CASES.items():
-        params = plant.song_params(
-            defaults=False, effects={"wg_compliance": True, **effects}, **overrides
+@functools.cache
+def _simulate(name):
+    """TRAIN and TEST of one case, simulated when a test first asks for it: under xdist each
+    worker simulates (and compiles the plant for) only the cases it runs."""
+    scenario, effects, overrides, _, _ = CASES[name]
+    params = plant.song_params(
+        defaults=False, effects={"wg_compliance": True, **effects}, **overrides
+    )
+    recs = [
+        plant.simulate_scenario(
+            scenario,
+            key=jax.random.PRNGKey(seed),
+            duration=DURATION,
+            params=params,
+            output_period=2e-3,
         )
-        recs = [
-            plant.simulate_scenario(
-                scenario,
-                key=jax.random.PRNGKey(seed),
-                duration=DURATION,
-                params=params,
-                output_period=2e-3,
-            )
-            for seed in (11, 12)
-        ]
-        out[name] = tuple(r.select(np.asarray(r.t) >= 0.5) for r in recs)
-    return out
+        for seed in (11, 12)
+    ]
+    return tuple(r.select(np.asarray(r.t) >= 0.5) for r in recs)
 
 
 def _true_rms(train, test, terms):
@@ -148,8 +149,8 @@ def _true_rms(train, test, terms):
 
 
 @pytest.mark.parametrize("name", [n for n in CASES if n != "clean"])
-def test_loop_names_the_undeclared_effect(data, name):
-    train, test = data[name]
+def test_loop_names_the_undeclared_effect(name):
+    train, test = _simulate(name)
     expect, true_terms = CASES[name][3], CASES[name][4]
     res = discover(train, test, JOINT, DiscoverOptions(max_effects=3))
     print(name, res.aux.effects, res.aux.baseline.rms, [s.test.rms for s in res.aux.steps])
@@ -170,7 +171,7 @@ def test_loop_names_the_undeclared_effect(data, name):
     assert res.aux.final.rms < res.aux.baseline.rms
 
 
-def test_clean_case_adds_nothing(data):
-    train, test = data["clean"]
+def test_clean_case_adds_nothing():
+    train, test = _simulate("clean")
     res = discover(train, test, JOINT, DiscoverOptions(max_effects=3))
     assert res.aux.effects == [], res.aux.final_ranking[:3]

@@ -79,7 +79,7 @@ def bench_sweep(n_samples: int, repeats: int, progress=None) -> dict:
 
     def fit_sweep():
         fits, _ = nested_fit(big, members, sig, torque)
-        return [f.model.coef.block_until_ready() for f in fits]
+        return [f.value.coef.block_until_ready() for f in fits]
 
     say("compiling and timing one order-6 fit")
     t0 = time.perf_counter()

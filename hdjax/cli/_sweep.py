@@ -9,7 +9,7 @@ from pathlib import Path
 
 from .._errors import ConfigError, HdjaxError
 from ..compliance import estimate_torque_arrays
-from ..compliance._nested import batched_estimates, nested_fit
+from ..compliance._nested import batched_estimates, estimable, member_message, nested_fit
 from ..config import (
     Experiment,
     apply_setting,
@@ -412,21 +412,22 @@ def _members_nested(exp, setting, values, todo, cfgs, ds, progress):
     for k, i in enumerate(todo):
         f = fits[k]
         tq = torques[k]
-        if tq is None and f.model is not None and not f.message:
-            tq = np.asarray(estimate_torque_arrays(f.model, test_sig))
+        if tq is None and estimable(f):
+            tq = np.asarray(estimate_torque_arrays(f.value, test_sig))
         if tq is None:
-            res = {"rms": None, "max": None, "message": f.message or "not estimable"}
+            res = {"rms": None, "max": None, "message": member_message(f) or "not estimable"}
         else:
             parts = np.split(np.asarray(tq), splits)
             res = _pooled(dict(zip(ds.test, parts)), ds)
-            if f.message or f.note:
-                res["message"] = " ".join((f.note + " " + f.message).split())
+            if member_message(f):
+                res["message"] = member_message(f)
+        st = f.stats
         res.update(
             {
-                "fit_s": f.fit_s,
-                "n_terms": f.n_terms,
-                "condition": f.condition,
-                "residual_rms_arcsec": f.residual_rms * 648000.0 / np.pi,
+                "fit_s": st["fit_time_s"],
+                "n_terms": st["n_terms"],
+                "condition": st["condition"],
+                "residual_rms_arcsec": st["residual_rms"] * 648000.0 / np.pi,
             }
         )
         results[i] = res

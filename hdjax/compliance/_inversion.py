@@ -31,6 +31,7 @@ torque being estimated, causally, by an implicit step per sample (`_path_states`
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import equinox as eqx
@@ -338,7 +339,7 @@ def _check_estimable(model: ComplianceModel) -> None:
         raise InversionError("the model has no calibrated segment; calibrate it first")
 
 
-def torque_estimator(model: ComplianceModel):
+def torque_estimator(model: ComplianceModel) -> Callable[[Float[Array, " 6"]], Float[Array, " 5"]]:
     """A compiled one-sample estimator specialised to `model` (checked once, here).
 
     **Returns:** a function of a float64 array `[twist, current, theta_m, theta_l, omega_m,

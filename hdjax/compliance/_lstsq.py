@@ -40,12 +40,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._custom_types import ArrayLike, Float
 from .._errors import CalibrationError, DataError, InversionError
 from .._features import signals
 from .._recording import Recording
 from .._solution import RESULTS, Solution
 from ._model import ComplianceModel
 from ._signals import Signals
+
+CalibrationData = Recording | tuple[Signals, Float[ArrayLike, " n"]]
+"""What a calibration reads: a recording with a reference torque, or `(signals, torque)`."""
 
 RANK_RTOL = 1e-10
 """Singular values of the scaled design below `RANK_RTOL * max` count as zero."""
@@ -262,7 +266,9 @@ def check_sample_count(n: int, p: int) -> None:
         )
 
 
-def calibrate_lstsq(model: ComplianceModel, data, *, throw: bool = True) -> Solution:
+def calibrate_lstsq(
+    model: ComplianceModel, data: CalibrationData, *, throw: bool = True
+) -> Solution:
     """Calibrate by linear least squares (Song et al. eqs. (15)-(17)), column-scaled (see module).
 
     **Arguments:**

@@ -16,6 +16,8 @@ residual loop) are always shared.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import Any
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -171,7 +173,14 @@ class ComplianceModel(eqx.Module):
         )
 
     @classmethod
-    def build(cls, *, base_terms, effect_terms=(), per_segment=True, **static) -> ComplianceModel:
+    def build(
+        cls,
+        *,
+        base_terms: Sequence[AbstractTerm],
+        effect_terms: Sequence[AbstractTerm] = (),
+        per_segment: bool = True,
+        **static: Any,
+    ) -> ComplianceModel:
         """A model with the given structure, zero coefficients and every term active."""
         n_seg = len(static["knots"]) + 1
         n_base = sum(len(t.names()) for t in base_terms)
@@ -186,7 +195,12 @@ class ComplianceModel(eqx.Module):
             **static,
         )
 
-    def restructured(self, *, knots=None, effect_terms=None) -> ComplianceModel:
+    def restructured(
+        self,
+        *,
+        knots: Sequence[float] | None = None,
+        effect_terms: Sequence[AbstractTerm] | None = None,
+    ) -> ComplianceModel:
         """The same joint and base terms with other knots and/or effect groups (coefficients
         reset to zero, every term active)."""
         return ComplianceModel.build(
@@ -199,7 +213,7 @@ class ComplianceModel(eqx.Module):
             per_segment=self.per_segment,
         )
 
-    def with_effects(self, *terms) -> ComplianceModel:
+    def with_effects(self, *terms: AbstractTerm) -> ComplianceModel:
         """The same structure with further effect groups (coefficients reset to zero)."""
         return self.restructured(effect_terms=self.effect_terms + tuple(terms))
 

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Sequence
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -27,8 +29,19 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 
+from .._custom_types import Array, Bool, Float
+from .._features import Signals
+from .._solution import RESULTS, Solution
 from ._inversion import calibrated_segments, estimate_torque_arrays
-from ._lstsq import CSNE_MAX_COND, _compact_index, _scaled_qr, _select_active, check_invertible
+from ._lstsq import (
+    CSNE_MAX_COND,
+    _compact_index,
+    _scaled_qr,
+    _select_active,
+    check_invertible,
+    invertibility,
+)
+from ._model import ComplianceModel
 
 
 @eqx.filter_jit
@@ -70,22 +83,35 @@ def _residual_atr(model, sig, torque, coefs):
     return atr
 
 
-@dataclasses.dataclass
-class NestedMember:
-    """One member's fit: the calibrated `model` (or `None`), diagnostics and its fit time."""
+class NestedCoef(NamedTuple):
+    """A member's coefficients placed in the largest structure's columns (its `aux`)."""
 
-    model: object | None
-    n_terms: int
-    condition: float
-    residual_rms: float
-    fit_s: float
-    message: str = ""
-    note: str = ""
-    coef_big: np.ndarray | None = None
-    active_big: np.ndarray | None = None
+    coef_big: Float[np.ndarray, " n_big"]
+    active_big: Bool[np.ndarray, " n_big"]
 
 
-def nested_fit(big, members: list, sig, torque) -> tuple[list[NestedMember], float]:
+def member_message(member: Solution) -> str:
+    """What a user reads about one member's fit: the minimum-norm note of a rank-deficient
+    design and why a non-invertible compliance cannot be inverted; `""` when it succeeded."""
+    st = member.stats
+    note = ""
+    if st["rank"] < st["n_terms"]:
+        note = f"rank-deficient design (rank {st['rank']} < {st['n_terms']} terms), minimum-norm"
+    return " ".join((note + " " + check_invertible(member.value)).split())
+
+
+def estimable(member: Solution) -> bool:
+    """Whether a member's compliance can be inverted for torque (a rank-deficient member is, by
+    its minimum-norm coefficients)."""
+    return member.result in (RESULTS.successful, RESULTS.rank_deficient)
+
+
+def nested_fit(
+    big: ComplianceModel,
+    members: Sequence[ComplianceModel],
+    sig: Signals,
+    torque: Float[Array, " n"],
+) -> tuple[list[Solution], float]:
     r"""Calibrate every member model (each a column subset of `big`) from shared passes.
 
     One pass accumulates the Gram matrix of the largest model; members whose scaled condition
@@ -101,8 +127,13 @@ def nested_fit(big, members: list, sig, torque) -> tuple[list[NestedMember], flo
     - `members`: member model structures (uncalibrated).
     - `sig`, `torque`: training signals and reference torque.
 
-    **Returns:** `(results, shared_s)`: one [`NestedMember`][] per member and the time of the
-    shared passes [s].
+    **Returns:** `(results, shared_s)`: one [`hdjax.Solution`][] per member and the time of the
+    shared passes [s]. A member's `value` is its calibrated model, its `result`
+    `RESULTS.not_invertible` or `RESULTS.twist_reversed` when the compliance cannot be
+    inverted, else `RESULTS.rank_deficient` when its design is (the coefficients are then the
+    minimum-norm solution, still estimable), else `RESULTS.successful`; `stats` holds `n_terms`,
+    `rank`, `condition`, `residual_rms` [rad] and `fit_time_s`; `aux` a [`NestedCoef`][]. See
+    [`member_message`][] for the text a user reads.
     """
     t0 = time.perf_counter()
     g, atb, btb = jax.block_until_ready(_gram(big, sig, torque))
@@ -182,40 +213,40 @@ def nested_fit(big, members: list, sig, torque) -> tuple[list[NestedMember], flo
         coef_big[cols] = x
         active_big = np.zeros(big.n_coef, bool)
         active_big[cols] = True
-        note = ""
-        if e.get("rank", len(cols)) < len(cols):
-            note = f"rank-deficient design (rank {e['rank']} < {len(cols)} terms), minimum-norm"
-        results.append(
-            NestedMember(
-                model=fitted,
-                n_terms=int(active.sum()),
-                condition=e["cond"],
-                residual_rms=float(np.sqrt(max(rss, 0.0) / n)),
-                fit_s=e["own_s"],
-                message=check_invertible(fitted),
-                note=note,
-                coef_big=coef_big,
-                active_big=active_big,
-            )
+        n_terms = int(active.sum())
+        rank = int(e.get("rank", len(cols)))
+        result = invertibility(fitted)
+        if result == RESULTS.successful and rank < len(cols):
+            result = RESULTS.rank_deficient
+        stats = dict(
+            n_terms=n_terms,
+            rank=rank,
+            condition=e["cond"],
+            residual_rms=float(np.sqrt(max(rss, 0.0) / n)),
+            fit_time_s=e["own_s"],
         )
+        results.append(Solution(fitted, result, stats, NestedCoef(coef_big, active_big)))
     return results, shared_s
 
 
-def batched_estimates(big, fits: list[NestedMember], sig) -> list[np.ndarray | None]:
+def batched_estimates(
+    big: ComplianceModel, fits: Sequence[Solution], sig: Signals
+) -> list[Float[np.ndarray, " n"] | None]:
     """Held-out torque of every nested member, members with the same calibrated segments in one
-    `vmap` over coefficient vectors of the largest structure."""
+    `vmap` over coefficient vectors of the largest structure; `None` for a member whose
+    compliance cannot be inverted."""
     out: list = [None] * len(fits)
     groups: dict = {}
     for i, f in enumerate(fits):
-        if f.coef_big is None or f.message:
+        if not estimable(f):
             continue
-        groups.setdefault(tuple(calibrated_segments(big, f.active_big)), []).append(i)
+        groups.setdefault(tuple(calibrated_segments(big, f.aux.active_big)), []).append(i)
     for members in groups.values():
         union = np.zeros(big.n_coef, bool)
         for i in members:
-            union |= fits[i].active_big
+            union |= fits[i].aux.active_big
         model = dataclasses.replace(big, active=tuple(bool(a) for a in union))
-        coefs = jnp.asarray(np.stack([fits[i].coef_big for i in members]))
+        coefs = jnp.asarray(np.stack([fits[i].aux.coef_big for i in members]))
         one = lambda c: estimate_torque_arrays(eqx.tree_at(lambda m: m.coef, model, c), sig)
         torques = np.asarray(jax.vmap(one)(coefs))
         for row, i in enumerate(members):

@@ -26,6 +26,7 @@ from .._custom_types import Array, ArrayLike, Float
 from .._errors import CalibrationError, ConfigError, InversionError
 from .._solution import RESULTS, Solution
 from ._lstsq import (
+    CalibrationData,
     _SegmentedDesign,
     _select_active,
     _with_static,
@@ -115,7 +116,7 @@ def rls_solve(
     *,
     block_size: int = 1,
     forgetting: float = 1.0,
-    init_samples=None,
+    init_samples: int | None = None,
 ) -> tuple[RLSState, Float[Array, "n_steps p"]]:
     """Recursive least squares over all rows of `a` (in order).
 
@@ -174,7 +175,7 @@ def rls_solve(
 
 def calibrate_rls(
     model: ComplianceModel,
-    data,
+    data: CalibrationData,
     *,
     block_size: int = 32,
     forgetting: float = 1.0,

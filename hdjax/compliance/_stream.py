@@ -22,8 +22,12 @@ and the residual loop feed them design blocks.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import scipy.linalg
+
+from .._custom_types import ArrayLike, Float, Int
 
 
 class NormalEquations:
@@ -40,14 +44,20 @@ class NormalEquations:
     block), default all of them in order.
     """
 
-    def __init__(self, n_coef: int, n_folds: int = 1):
+    def __init__(self, n_coef: int, n_folds: int = 1) -> None:
         self.p = int(n_coef)
         self.g = np.zeros((n_folds, self.p, self.p))
         self.atb = np.zeros((n_folds, self.p))
         self.btb = np.zeros(n_folds)
         self.n = np.zeros(n_folds, dtype=np.int64)
 
-    def add(self, a: np.ndarray, b: np.ndarray, columns=None, fold: int = 0) -> None:
+    def add(
+        self,
+        a: Float[ArrayLike, "q rows"],
+        b: Float[ArrayLike, " rows"],
+        columns: Int[ArrayLike, " q"] | Sequence[int] | None = None,
+        fold: int = 0,
+    ) -> None:
         a = np.asarray(a, np.float64)
         b = np.asarray(b, np.float64)
         if columns is None:
@@ -58,13 +68,15 @@ class NormalEquations:
             self.g[fold][np.ix_(idx, idx)] += a @ a.T
             self.atb[fold][idx] += a @ b
 
-    def add_rhs(self, b: np.ndarray, fold: int = 0) -> None:
+    def add_rhs(self, b: Float[ArrayLike, " rows"], fold: int = 0) -> None:
         """Count the rows of a block and add $b^\\top b$ (once per row, whatever the blocks)."""
         b = np.asarray(b, np.float64)
         self.btb[fold] += b @ b
         self.n[fold] += b.shape[0]
 
-    def total(self, leave_out: int | None = None):
+    def total(
+        self, leave_out: int | None = None
+    ) -> tuple[Float[np.ndarray, "p p"], Float[np.ndarray, " p"], float, int]:
         """`(G, A^T b, b^T b, n)` over every fold, or every fold but `leave_out`."""
         keep = np.ones(self.g.shape[0], bool)
         if leave_out is not None:
@@ -113,18 +125,18 @@ class StreamingQR:
       the data, `sqrt(diag(G))`); columns with a zero scale are left out.
     """
 
-    def __init__(self, scale: np.ndarray):
+    def __init__(self, scale: Float[ArrayLike, " p"]) -> None:
         self.scale = np.asarray(scale, np.float64)
         self.p = self.scale.shape[0]
         self.r = np.zeros((0, self.p + 1))
 
-    def add(self, a: np.ndarray, b: np.ndarray) -> None:
+    def add(self, a: Float[ArrayLike, "rows p"], b: Float[ArrayLike, " rows"]) -> None:
         """Fold in a block: `a` of shape `(rows, p)` (unscaled) and `b` of shape `(rows,)`."""
         s = np.where(self.scale > 0, self.scale, 1.0)
         block = np.column_stack([np.asarray(a) / s[None, :], np.asarray(b)])
         self.r = np.linalg.qr(np.vstack([self.r, block]), mode="r")
 
-    def factor(self) -> tuple[np.ndarray, np.ndarray, float]:
+    def factor(self) -> tuple[Float[np.ndarray, "p p"], Float[np.ndarray, " p"], float]:
         r"""`(R, Q^T b, rss)`: the $p \times p$ factor of the scaled design, $Q^\top b$ and the
         residual sum of squares of the least-squares solution (full rank)."""
         p = self.p

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,7 @@ from .._joint import Joint
 from .._recording import Recording, make_recording
 from ..compliance import paper_knots
 from ..reference import describe_column_reference, load_with_reference
+from ._load import Experiment
 from ._schema import joint_of
 from ._streamed import StreamedDataset, build_streamed_dataset, streams
 
@@ -58,7 +60,9 @@ class Dataset:
         return sum(r.n_samples for r in self.train)
 
 
-def build_dataset(exp, progress=None) -> Dataset | StreamedDataset:
+def build_dataset(
+    exp: Experiment, progress: Callable[[str], None] | None = None
+) -> Dataset | StreamedDataset:
     """The [`hdjax.config.Dataset`][] an experiment describes (a
     [`hdjax.config.StreamedDataset`][] when `[fit] chunk` streams the files).
 

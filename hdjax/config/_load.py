@@ -7,7 +7,9 @@ import re
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
+from .._custom_types import PathLike
 from .._errors import ConfigError
 from .._io import TOML_HINT, read_text
 from ._schema import apply_setting, resolve
@@ -45,7 +47,7 @@ def parse_toml(text: str, *, where: str) -> dict:
         raise ConfigError(f"{where}: TOML syntax error: {msg}") from None
 
 
-def parse_value(text: str):
+def parse_value(text: str) -> Any:
     """A command-line value read as TOML (`4`, `1.5`, `true`, `[1, 2]`, `"x"`), else a string."""
     try:
         return tomllib.loads(f"v = {text}")["v"]
@@ -53,7 +55,7 @@ def parse_value(text: str):
         return text
 
 
-def load_experiment(path, overrides: Mapping[str, object] | None = None) -> Experiment:
+def load_experiment(path: PathLike, overrides: Mapping[str, object] | None = None) -> Experiment:
     """Read, validate and resolve an experiment file.
 
     **Arguments:**
@@ -81,7 +83,9 @@ def load_experiment(path, overrides: Mapping[str, object] | None = None) -> Expe
     return exp
 
 
-def experiment_from_dict(doc: Mapping, *, base_dir=None, where: str = "config") -> Experiment:
+def experiment_from_dict(
+    doc: Mapping, *, base_dir: PathLike | None = None, where: str = "config"
+) -> Experiment:
     """An [`hdjax.config.Experiment`][] from an in-memory document (for tests and scripts)."""
     exp = Experiment(resolve(doc, where=where))
     exp.path = None if base_dir is None else Path(base_dir).resolve() / "<memory>.toml"

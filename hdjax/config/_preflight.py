@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from .._custom_types import PathLike
 from .._errors import ConfigError, HdjaxError, ModelMismatchError
 from .._memory import (  # noqa: F401 - re-exported: the checks' historical home
     _BYTES_PER_SAMPLE,
@@ -60,7 +61,7 @@ def _n_samples(cfg: dict, base_dir: Path | None) -> tuple[float, str, str, float
     return n, "the data files", "read a shorter part of the log", _CSV_FACTOR * total
 
 
-def preflight(cfg: dict, *, base_dir=None, where: str = "config") -> None:
+def preflight(cfg: dict, *, base_dir: PathLike | None = None, where: str = "config") -> None:
     """Check a resolved config before any work: its model can be built and its data fits in
     memory.
 

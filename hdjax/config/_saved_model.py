@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from .._custom_types import PathLike
 from .._errors import DataError, ModelMismatchError
 from .._io import atomic_write_bytes
 from .._joint import Joint
@@ -120,7 +121,14 @@ def _network_from_dict(d: dict):
     return eqx.tree_at(lambda n: (n.weights, n.biases), net, (weights, biases))
 
 
-def save_model(path, joint: Joint, *, compliance=None, network=None, meta=None) -> Path:
+def save_model(
+    path: PathLike,
+    joint: Joint,
+    *,
+    compliance: ComplianceModel | None = None,
+    network: Network | None = None,
+    meta: dict | None = None,
+) -> Path:
     """Write a model file atomically (see the module docstring for the format).
 
     **Arguments:**
@@ -156,7 +164,7 @@ def save_model(path, joint: Joint, *, compliance=None, network=None, meta=None) 
     return path
 
 
-def load_model(path) -> SavedModel:
+def load_model(path: PathLike) -> SavedModel:
     """Read a model file, refusing a corrupt file or an incompatible format version.
 
     **Raises:** [`hdjax.DataError`][] for a missing, unreadable, truncated or edited file
@@ -231,7 +239,11 @@ def angle_ratio_mismatch(saved: SavedModel, recording: Recording) -> str:
 
 
 def check_compatible(
-    saved: SavedModel, recording: Recording, joint: Joint | None = None, *, check_angles=True
+    saved: SavedModel,
+    recording: Recording,
+    joint: Joint | None = None,
+    *,
+    check_angles: bool = True,
 ) -> None:
     """Refuse to apply a saved model to data it does not fit.
 

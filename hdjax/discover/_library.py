@@ -37,7 +37,14 @@ import math
 import numpy as np
 
 from .. import effects
-from ..effects import Candidate as Candidate, CandidateContext, harmonic_key as harmonic_key
+from .._custom_types import ArrayLike, Float
+from .._features import Signals
+from ..effects import (
+    AbstractTerm,
+    Candidate as Candidate,
+    CandidateContext,
+    harmonic_key as harmonic_key,
+)
 from ._spectrum import OrderSpectrum, order_power, order_spectrum, refine_peak, spectrum_peaks
 
 FAMILIES = effects.discover_families()
@@ -187,15 +194,15 @@ def spectrum_orders(
 
 
 def build_library(
-    sig,
-    torque,
-    residual,
+    sig: Signals,
+    torque: Float[ArrayLike, " n"],
+    residual: Float[ArrayLike, " n"],
     *,
     ratio: float,
     rated_torque: float,
     existing_keys: tuple[str, ...],
-    existing_terms: tuple = (),
-    options=None,
+    existing_terms: tuple[AbstractTerm, ...] = (),
+    options: LibraryOptions | None = None,
     extra_columns: tuple[str, ...] = (),
     twist_sign: float = 1.0,
 ) -> tuple[list[Candidate], dict[str, OrderSpectrum]]:

@@ -30,18 +30,20 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from .._custom_types import Float
 from .._errors import CalibrationError, DataError, HdjaxError, InversionError
 from .._joint import Joint
 from .._metrics import ErrorMetrics, error_metrics
 from .._recording import Recording
 from .._solution import RESULTS, Solution
 from ..compliance import ComplianceModel, merge_sparse_segments
-from ..compliance._lstsq import failure_message, prepare
+from ..compliance._lstsq import CalibrationData, failure_message, prepare
+from ..effects import AbstractTerm
 from ._folds import (
     contiguous_blocks,
     correlation_length,
@@ -105,7 +107,7 @@ class DiscoveryStep:
 
     key: str
     family: str
-    term: object
+    term: AbstractTerm
     cv_gain: float
     fold_gains: list[float]
     test: ErrorMetrics
@@ -113,7 +115,7 @@ class DiscoveryStep:
     ranking: list[dict]
     spectra: dict[str, OrderSpectrum]
     model: ComplianceModel
-    torque_estimate: np.ndarray
+    torque_estimate: Float[np.ndarray, " n_test"]
     stability: float = 1.0
     cv_torque_rms: float = float("nan")
     cv_twist_rms_arcsec: float = float("nan")
@@ -128,14 +130,14 @@ class DiscoveryRecord:
     baseline_model: ComplianceModel
     baseline: ErrorMetrics
     baseline_twist_rms_arcsec: float
-    baseline_estimate: np.ndarray
+    baseline_estimate: Float[np.ndarray, " n_test"]
     steps: list[DiscoveryStep]
     final: ErrorMetrics
     final_spectra: dict[str, OrderSpectrum]
     final_ranking: list[dict]
     notes: list[str]
     test: Recording
-    train_residual_final: np.ndarray
+    train_residual_final: Float[np.ndarray, " n_train"]
     baseline_cv_torque_rms: float = float("nan")
     baseline_cv_twist_rms_arcsec: float = float("nan")
     unexplained: list = dataclasses.field(default_factory=list)
@@ -180,7 +182,9 @@ def _calibrate_monotone(model, train, notes):
         model = _merge_knot(model, j)
 
 
-def calibrate_baseline(train: Recording, joint: Joint, options: DiscoverOptions, notes: list):
+def calibrate_baseline(
+    train: Recording, joint: Joint, options: DiscoverOptions, notes: list[str]
+) -> ComplianceModel:
     """The starting model (paper structure) calibrated on `train`, with documented fallbacks.
 
     Segments the torque hardly covers, or whose compliance comes out non-positive, are merged
@@ -360,7 +364,8 @@ def score_candidates(
         sig, torque = training_data(model, data, est)
         a_full = design(model, sig, torque)
         active = np.asarray(model.active)
-        a = a_full if active.all() else a_full[:, active]
+        # np.compress copies the active columns several times faster than a[:, active]
+        a = a_full if active.all() else np.compress(active, a_full, axis=1)
         y = np.asarray(sig.twist)
         resid = y - a_full @ np.asarray(model.coef)
         del a_full
@@ -687,7 +692,13 @@ def _discover(train, test, joint, options, progress) -> Solution:
     return Solution(model, RESULTS.successful, stats, aux=record)
 
 
-def refit_structure(train, test, joint: Joint, terms, options: DiscoverOptions = DiscoverOptions()):
+def refit_structure(
+    train: Recording,
+    test: Recording,
+    joint: Joint,
+    terms: Sequence[AbstractTerm],
+    options: DiscoverOptions = DiscoverOptions(),
+) -> ErrorMetrics:
     """TEST errors of the starting model plus `terms` (e.g. the true structure), calibrated by
     the same pipeline as the loop's (hysteresis driven by the model's own estimate).
 
@@ -700,7 +711,9 @@ def refit_structure(train, test, joint: Joint, terms, options: DiscoverOptions =
     return _test_errors(model, test, joint.rated_torque)[0]
 
 
-def residual_spectra(model: ComplianceModel, data, *, orders=(0.5, 8.0)) -> dict:
+def residual_spectra(
+    model: ComplianceModel, data: CalibrationData, *, orders: tuple[float, float] = (0.5, 8.0)
+) -> dict[str, OrderSpectrum]:
     """Order spectra of a model's twist residual against both angles (for reports)."""
     sig, torque = prepare(model, data)
     r = np.asarray(sig.twist) - np.asarray(model.predict_twist(sig, torque))

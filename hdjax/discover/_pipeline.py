@@ -23,9 +23,10 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 
+from .._custom_types import Array, ArrayLike, Bool, Float
 from .._errors import InversionError
 from .._recording import Recording
-from ..compliance import ComplianceModel, calibrate_lstsq, signals_from_recording
+from ..compliance import ComplianceModel, Signals, calibrate_lstsq, signals_from_recording
 from ..compliance._inversion import _estimate
 from ..compliance._lstsq import CSNE_MAX_COND, _design
 from ..effects import SEGMENT_START, TORQUE_PATH
@@ -40,31 +41,35 @@ model's own estimate (the change after the third round is far below the noise)."
 class PipelineData:
     """Signals (gap-safe), reference torque and segment starts of one recording."""
 
-    sig: object
-    torque: np.ndarray
-    starts: np.ndarray
+    sig: Signals
+    torque: Float[np.ndarray, " n"]
+    starts: Bool[np.ndarray, " n"]
 
     @property
     def n(self) -> int:
         return int(self.torque.size)
 
     @property
-    def twist(self) -> np.ndarray:
+    def twist(self) -> Float[np.ndarray, " n"]:
         return np.asarray(self.sig.twist)
 
-    def with_driver(self, driver):
+    def with_driver(self, driver: Float[ArrayLike, " n"]) -> Signals:
         """The signals with `driver` as the torque path of hysteresis columns."""
         extras = dict(self.sig.extras)
         extras[TORQUE_PATH] = jnp.asarray(driver, jnp.float64)
         return eqx.tree_at(lambda s: s.extras, self.sig, extras)
 
-    def pair(self, driver=None):
+    def pair(
+        self, driver: Float[ArrayLike, " n"] | None = None
+    ) -> tuple[Signals, Float[Array, " n"]]:
         """`(Signals, torque)` for calibration, with the driver when given."""
         sig = self.sig if driver is None else self.with_driver(driver)
         return sig, jnp.asarray(self.torque)
 
 
-def pipeline_signals(rec: Recording, ratio: float, twist_sign: float, velocity: str):
+def pipeline_signals(
+    rec: Recording, ratio: float, twist_sign: float, velocity: str
+) -> PipelineData:
     """Model signals of a recording with gaps: velocities at the first sample after a gap take
     the next sample's value (a backward difference across a gap is no derivative), and the
     signal `SEGMENT_START` marks where memory states restart. **Returns:** a PipelineData."""
@@ -140,7 +145,7 @@ def design(model: ComplianceModel, sig, torque) -> np.ndarray:
     return np.asarray(_design(canonical(model), sig, jnp.asarray(torque)))
 
 
-def estimate(model: ComplianceModel, data: PipelineData) -> np.ndarray:
+def estimate(model: ComplianceModel, data: PipelineData) -> Float[np.ndarray, " n"]:
     """Torque estimate by inversion (eqs. (26)-(27)); non-finite values where it fails."""
     return np.asarray(_estimate(canonical(model), data.sig).torque)
 
@@ -223,10 +228,12 @@ class FoldSolver:
         rows `te`."""
         a, y, act = self.a, self.y, self.active
         coef = np.zeros(a.shape[1])
-        at = a[te][:, act]
+        # one gather of rows and columns (indexing the columns of a row copy is ~8x slower)
+        at = a[np.ix_(te, act)]
         keep = (self.nonzero - np.count_nonzero(at, axis=0)) > 0
         idx = act[keep]
-        at = at[:, keep]
+        if not keep.all():
+            at = np.compress(keep, at, axis=1)
         g = self.g[np.ix_(keep, keep)] - at.T @ at
         aty = self.aty[keep] - at.T @ y[te]
         d = np.sqrt(np.maximum(np.diag(g), 0.0))

@@ -7,14 +7,16 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from .. import effects
+from .._custom_types import PathLike
 from .._features import find_gaps
 from .._plotting import fixed_margins, pyplot
 from .._solution import Solution
-from ..compliance._lstsq import prepare
+from ..compliance._lstsq import CalibrationData, prepare
 from ._loop import ARCSEC, DiscoveryRecord, residual_spectra
 from ._pipeline import design
 
@@ -241,7 +243,14 @@ def report_markdown(d: dict, figures: list[tuple[str, str]]) -> str:
     return "\n".join(lines)
 
 
-def write_report(solution: Solution, out: Path, *, train=None, figures=True, extra=None):
+def write_report(
+    solution: Solution,
+    out: PathLike,
+    *,
+    train: CalibrationData | None = None,
+    figures: bool = True,
+    extra: dict[str, Any] | None = None,
+) -> dict[str, Any]:
     """Write `report.json`, `report.md` and `figures/` of a [`hdjax.discover.discover`][]
     solution into `out`, atomically.
 

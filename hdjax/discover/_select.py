@@ -13,10 +13,12 @@ segment, while samples inside a block stay together against short-range correlat
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 import scipy.linalg
 
+from .._custom_types import ArrayLike, Bool, Float, Int
 from .._lazy import pysindy
 
 MAX_SINDY_ROWS = 20000
@@ -49,7 +51,12 @@ def _scaled(a: np.ndarray):
 
 
 def fold_basis(
-    a: np.ndarray, y: np.ndarray, n_folds: int = 5, block: int = 200, *, tests=None
+    a: Float[np.ndarray, "n n_terms"],
+    y: Float[np.ndarray, " n"],
+    n_folds: int = 5,
+    block: int = 200,
+    *,
+    tests: Sequence[Int[np.ndarray, " _n_test"]] | None = None,
 ) -> FoldBasis:
     """QR of the base design on each fold's training part, and the base held-out error.
 
@@ -122,20 +129,22 @@ def cv_gains(basis: FoldBasis, groups: list[np.ndarray]) -> list[tuple[float, np
     return [(float(t), p) for t, p in zip(total, per_fold)]
 
 
-def cv_gain(basis: FoldBasis, cols: np.ndarray) -> tuple[float, np.ndarray]:
+def cv_gain(
+    basis: FoldBasis, cols: Float[ArrayLike, "n ..."]
+) -> tuple[float, Float[np.ndarray, " n_folds"]]:
     """`cv_gains` for a single group."""
     return cv_gains(basis, [np.atleast_2d(np.asarray(cols).T).T])[0]
 
 
 def sindy_select(
-    a: np.ndarray,
-    residual: np.ndarray,
-    columns: list[np.ndarray],
-    names: list[str],
+    a: Float[np.ndarray, "n n_terms"],
+    residual: Float[np.ndarray, " n"],
+    columns: Sequence[Float[np.ndarray, " n"]],
+    names: Sequence[str],
     *,
     threshold: float = 0.02,
     alpha: float = 1e-6,
-) -> np.ndarray:
+) -> Bool[np.ndarray, " n_columns"]:
     """Sparse regression of the residual on the candidate library with pysindy's STLSQ.
 
     The library columns are first made orthogonal to the base design (what the base model can

@@ -14,9 +14,12 @@ References: M. Zechmeister, M. Kürster, "The generalised Lomb-Scargle periodogr
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
+
+from .._custom_types import ArrayLike, Float, Int, Real
 
 MAX_SPECTRUM_SAMPLES = 10000
 
@@ -25,8 +28,8 @@ class OrderSpectrum(NamedTuple):
     """Explained-variance fraction of a residual against trial orders of one angle."""
 
     signal: str
-    orders: np.ndarray
-    power: np.ndarray
+    orders: Float[np.ndarray, " n_orders"]
+    power: Float[np.ndarray, " n_orders"]
     resolution: float
     """Order resolution $2\\pi / \\mathrm{span}(\\theta)$: peaks closer than this merge."""
 
@@ -94,7 +97,7 @@ def _ls_power(theta: np.ndarray, r: np.ndarray, orders: np.ndarray) -> np.ndarra
     return explained / total
 
 
-def subsample(n: int, limit: int = MAX_SPECTRUM_SAMPLES) -> np.ndarray:
+def subsample(n: int, limit: int = MAX_SPECTRUM_SAMPLES) -> Int[np.ndarray, " m"]:
     """Evenly spaced indices, at most `limit` of them (the periodogram needs no more)."""
     if n <= limit:
         return np.arange(n)
@@ -102,8 +105,8 @@ def subsample(n: int, limit: int = MAX_SPECTRUM_SAMPLES) -> np.ndarray:
 
 
 def order_spectrum(
-    theta,
-    residual,
+    theta: Real[ArrayLike, " n"],
+    residual: Real[ArrayLike, " n"],
     *,
     signal: str = "theta_m",
     min_order: float = 0.5,
@@ -127,7 +130,11 @@ def order_spectrum(
     return OrderSpectrum(signal, orders, power, resolution)
 
 
-def order_power(theta, residual, orders) -> np.ndarray:
+def order_power(
+    theta: Real[ArrayLike, " n"],
+    residual: Real[ArrayLike, " n"],
+    orders: Real[ArrayLike, " n_orders"] | Sequence[float],
+) -> Float[np.ndarray, " n_orders"]:
     """Periodogram values at given orders."""
     idx = subsample(np.asarray(theta).size)
     th = np.asarray(theta, np.float64)[idx]
@@ -135,7 +142,9 @@ def order_power(theta, residual, orders) -> np.ndarray:
     return _ls_power(th, r, np.asarray(orders, np.float64).reshape(-1))
 
 
-def refine_peak(theta, residual, order: float, resolution: float) -> float:
+def refine_peak(
+    theta: Real[ArrayLike, " n"], residual: Real[ArrayLike, " n"], order: float, resolution: float
+) -> float:
     """Refine a periodogram peak by golden-section search within ±resolution/2."""
     theta = np.asarray(theta, np.float64)
     idx = subsample(theta.size)
@@ -161,7 +170,9 @@ def refine_peak(theta, residual, order: float, resolution: float) -> float:
     return 0.5 * (lo + hi)
 
 
-def spectrum_peaks(spec: OrderSpectrum, *, n_peaks: int = 3, min_power: float = 0.01):
+def spectrum_peaks(
+    spec: OrderSpectrum, *, n_peaks: int = 3, min_power: float = 0.01
+) -> list[tuple[float, float]]:
     """The strongest local maxima of a spectrum, at least one resolution apart."""
     if n_peaks <= 0:
         return []

@@ -23,7 +23,7 @@ from .._recording import Recording
 from ..compliance import ComplianceModel, estimate_torque
 from ..network import Network, predict_torque
 from ._hybrid import HybridModel, predict_hybrid
-from ._inputs import hybrid_inputs
+from ._inputs import HybridInputs, hybrid_inputs
 
 
 class AbstractEstimator(eqx.Module):
@@ -65,7 +65,7 @@ class HybridEstimator(AbstractEstimator):
     joint: Joint = eqx.field(static=True)
     options: tuple = eqx.field(static=True, default=())
 
-    def inputs(self, recording: Recording):
+    def inputs(self, recording: Recording) -> HybridInputs:
         """The model's inputs for `recording` ([`hdjax.fit.hybrid_inputs`][])."""
         return hybrid_inputs(
             recording, self.joint, compliance=self.compliance, **dict(self.options)

@@ -35,12 +35,12 @@ import numpy as np
 import optax
 import optimistix as optx
 
-from .._custom_types import PRNGKeyArray
+from .._custom_types import Array, Float, PRNGKeyArray
 from .._errors import ConfigError, DataError, DivergenceError, ModelMismatchError
 from .._solution import RESULTS, Solution
-from ..compliance import estimate_torque_arrays
+from ..compliance import ComplianceModel, estimate_torque_arrays
 from ..network import FeatureLayout, Network, standardise
-from ..plant import motor_friction
+from ..plant import PlantParams, motor_friction
 from ._inputs import HybridInputs
 
 PLANT_FIELDS = ("torque_constant", "inertia_m", "coulomb_m", "viscous_m")
@@ -54,24 +54,24 @@ class HybridModel(eqx.Module):
     weights and biases, `plant_log`.
     """
 
-    compliance: eqx.Module | None
-    coef_delta: jax.Array
-    coef_scale: jax.Array
+    compliance: ComplianceModel | None
+    coef_delta: Float[Array, " n_coef"]
+    coef_scale: Float[Array, " n_coef"]
     network: Network | None
-    plant: eqx.Module | None
-    plant_log: jax.Array
+    plant: PlantParams | None
+    plant_log: Float[Array, " n_plant"]
     ratio: float = eqx.field(static=True)
     rated_torque: float = eqx.field(static=True)
 
     @property
-    def fitted_compliance(self):
+    def fitted_compliance(self) -> ComplianceModel | None:
         """The compliance model with the fitted coefficients."""
         if self.compliance is None:
             return None
         coef = self.compliance.coef + self.coef_scale * self.coef_delta
         return eqx.tree_at(lambda m: m.coef, self.compliance, coef)
 
-    def motor_torque(self, inp: HybridInputs):
+    def motor_torque(self, inp: HybridInputs) -> Float[Array, " n"]:
         r"""$T_d = N(K_t I + J_M\alpha_m + F_m(\omega_m))$ with the fitted plant parameters."""
         m = jnp.exp(self.plant_log)
         p = self.plant
@@ -93,12 +93,13 @@ class HybridModel(eqx.Module):
         fric = motor_friction(p, inp.omega_m)
         return self.ratio * (p.torque_constant * inp.current + p.inertia_m * inp.alpha_m + fric)
 
-    def network_input(self, inp: HybridInputs):
+    def network_input(self, inp: HybridInputs) -> Float[Array, "n n_in"]:
+        """The network's input rows: the features, and the motor torque when the plant is in."""
         if self.plant is None:
             return inp.x
         return jnp.concatenate([inp.x, self.motor_torque(inp)[:, None]], axis=1)
 
-    def __call__(self, inp: HybridInputs):
+    def __call__(self, inp: HybridInputs) -> Float[Array, " n"]:
         """Torque estimate [N·m] for every row of `inp`."""
         tau = jnp.zeros(inp.x.shape[0], jnp.float64)
         if self.compliance is not None:
@@ -111,9 +112,9 @@ class HybridModel(eqx.Module):
 def make_hybrid(
     inputs: HybridInputs,
     *,
-    compliance=None,
+    compliance: ComplianceModel | None = None,
     hidden: tuple[int, ...] | None = (16,),
-    plant=None,
+    plant: PlantParams | None = None,
     key: PRNGKeyArray,
 ) -> HybridModel:
     """Build a hybrid model: variant (a) `compliance=None`; (b) a calibrated compliance model
@@ -329,7 +330,7 @@ def _predict(model: HybridModel, inputs: HybridInputs):
     return model(inputs)
 
 
-def predict_hybrid(model: HybridModel, inputs: HybridInputs):
+def predict_hybrid(model: HybridModel, inputs: HybridInputs) -> Float[Array, " n"]:
     """Torque estimates [N·m] of a hybrid model for every row of `inputs` (jitted).
 
     The compliance part is inverted for torque as Song et al. eqs. (26)-(27), the network is

@@ -27,12 +27,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._custom_types import Array, Float
+from .._custom_types import Array, ArrayLike, Float, Int
 from .._errors import ConfigError
 from .._features import signals, smoothed_velocity
 from .._joint import Joint
 from .._recording import Recording
-from ..compliance import dahl_state
+from ..compliance import ComplianceModel, Signals, dahl_state
 from ..network import FeatureLayout, build_features
 
 TWIST_RATE_HALF_WINDOW = 2
@@ -52,24 +52,26 @@ class HybridInputs(eqx.Module):
     `None`), `layout` (names of the columns of `x`).
     """
 
-    sig: eqx.Module | None
-    x: jax.Array
-    current: jax.Array
-    omega_m: jax.Array
-    alpha_m: jax.Array
-    torque: jax.Array | None
+    sig: Signals | None
+    x: Float[Array, "n n_features"]
+    current: Float[Array, " n"]
+    omega_m: Float[Array, " n"]
+    alpha_m: Float[Array, " n"]
+    torque: Float[Array, " n"] | None
     layout: FeatureLayout
 
     @property
     def n_samples(self) -> int:
         return int(self.x.shape[0])
 
-    def take(self, idx) -> HybridInputs:
+    def take(self, idx: Int[ArrayLike, " m"] | slice) -> HybridInputs:
         """Rows `idx` (inside jit)."""
         return jax.tree.map(lambda a: a[idx], self)
 
 
-def dahl_scales(compliance, fractions: tuple[float, ...] = DAHL_FRACTIONS) -> tuple[float, ...]:
+def dahl_scales(
+    compliance: ComplianceModel, fractions: tuple[float, ...] = DAHL_FRACTIONS
+) -> tuple[float, ...]:
     r"""Twist scales [rad] for the Dahl memory inputs: $f\,\tau_0\,k_c$ for each fraction $f$.
 
     $k_c$ is the compliance of the segment holding 0 N·m (eq. (7), $k_1$ in the paper's naming) of
@@ -129,7 +131,7 @@ def hybrid_inputs(
     recording: Recording,
     joint: Joint,
     *,
-    compliance=None,
+    compliance: ComplianceModel | None = None,
     periodic: bool = True,
     kalman: bool = False,
     twist_rate: bool = False,

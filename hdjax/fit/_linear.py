@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax
@@ -39,11 +40,13 @@ import numpy as np
 import optax
 import optimistix as optx
 
+from .._custom_types import Array, ArrayLike, Bool, Float, Real
 from .._errors import CalibrationError, ConfigError, DataError
 from .._features import signals
 from .._recording import Recording
 from .._solution import RESULTS, Solution
 from ..compliance._lstsq import select_active
+from ..compliance._model import ComplianceModel
 
 METHODS = ("gauss_newton", "levenberg_marquardt", "adam")
 
@@ -55,29 +58,35 @@ class LinearProblem(eqx.Module):
     `b_scale`, `active` (mask over the model's coefficients).
     """
 
-    a: jax.Array
-    b: jax.Array
-    col_scale: jax.Array
-    b_scale: jax.Array
+    a: Float[Array, "n n_active"]
+    b: Float[Array, " n"]
+    col_scale: Float[Array, " n_active"]
+    b_scale: Float[Array, ""]
     active: tuple[bool, ...] = eqx.field(static=True)
 
-    def loss(self, u):
+    def loss(self, u: Float[Array, " n_active"]) -> Float[Array, ""]:
         r"""$L(u) = \mathrm{mean}((A D^{-1} u - b)^2)/\mathrm{mean}(b^2)$ in scaled units."""
         return jnp.mean((self.a @ u - self.b) ** 2)
 
-    def to_coef(self, u, n_coef: int) -> np.ndarray:
+    def to_coef(
+        self, u: Float[ArrayLike, " n_active"], n_coef: int
+    ) -> Float[np.ndarray, " n_coef"]:
         coef = np.zeros(n_coef)
         coef[np.asarray(self.active)] = (
             np.asarray(u) / np.asarray(self.col_scale) * float(self.b_scale)
         )
         return coef
 
-    def to_u(self, coef) -> jax.Array:
+    def to_u(self, coef: Real[ArrayLike, " n_coef"]) -> Float[Array, " n_active"]:
         c = jnp.asarray(np.asarray(coef)[np.asarray(self.active)])
         return c * self.col_scale / self.b_scale
 
 
-def linear_problem(model, recording: Recording, active=None) -> LinearProblem:
+def linear_problem(
+    model: ComplianceModel,
+    recording: Recording,
+    active: Bool[ArrayLike, " n_coef"] | Sequence[bool] | None = None,
+) -> LinearProblem:
     """Build the scaled problem of eq. (16) from a compliance model and a recording.
 
     `active` (mask) defaults to the coefficients [`hdjax.compliance.calibrate_lstsq`][] would
@@ -124,7 +133,7 @@ def _adam(problem: LinearProblem, w, lr, steps: int, floor: float):
 
 
 def fit_compliance_gradient(
-    model,
+    model: ComplianceModel,
     recording: Recording,
     *,
     method: str,
@@ -132,7 +141,7 @@ def fit_compliance_gradient(
     learning_rate: float = 0.05,
     whiten: bool = True,
     rtol: float = 1e-12,
-):
+) -> Solution:
     """Calibrate a compliance model by a gradient method instead of eq. (17).
 
     **Arguments:**

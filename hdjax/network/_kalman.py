@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, Float
+from .._custom_types import Array, ArrayLike, Float, Real
 from .._errors import ConfigError, DataError
 from .._recording import Recording
 
@@ -96,7 +96,7 @@ def _kalman_scan(z, x0, q, r, p0):
 
 
 def kalman_filter(
-    z,
+    z: Real[ArrayLike, " n"],
     *,
     q: float = PAPER_Q,
     r: float = PAPER_R,

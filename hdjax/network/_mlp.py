@@ -19,12 +19,14 @@ Two choices the paper leaves open, stated here:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, ArrayLike, Float, PRNGKeyArray
+from .._custom_types import Array, ArrayLike, Float, PRNGKeyArray, Real
 from .._errors import ConfigError, DataError
 from ._features import FeatureLayout, Features
 
@@ -58,8 +60,8 @@ class Network(eqx.Module):
     - `y_mean`, `y_scale`: torque standardisation (scalars); identity when `None`.
     """
 
-    weights: tuple[Float[Array, "n_in n_out"], ...]
-    biases: tuple[Float[Array, " n_out"], ...]
+    weights: tuple[Float[Array, "_n_in _n_out"], ...]
+    biases: tuple[Float[Array, " _n_out"], ...]
     x_mean: Float[Array, " n_features"]
     x_scale: Float[Array, " n_features"]
     y_mean: Float[Array, ""]
@@ -70,14 +72,14 @@ class Network(eqx.Module):
     def __init__(
         self,
         layout: FeatureLayout,
-        hidden=(20,),
+        hidden: Sequence[int] = (20,),
         *,
         key: PRNGKeyArray,
-        x_mean=None,
-        x_scale=None,
-        y_mean=None,
-        y_scale=None,
-    ):
+        x_mean: Real[ArrayLike, " n_features"] | Sequence[float] | None = None,
+        x_scale: Real[ArrayLike, " n_features"] | Sequence[float] | None = None,
+        y_mean: Real[ArrayLike, ""] | None = None,
+        y_scale: Real[ArrayLike, ""] | None = None,
+    ) -> None:
         hidden = _check_hidden(hidden)
         sizes = (layout.n_features,) + hidden + (1,)
         keys = jax.random.split(key, 2 * (len(sizes) - 1))
@@ -99,7 +101,7 @@ class Network(eqx.Module):
         self.layout = layout
         self.hidden = hidden
 
-    def normalised(self, z: Float[Array, "... n_features"]) -> Float[Array, ...]:
+    def normalised(self, z: Float[Array, "... n_features"]) -> Float[Array, " ..."]:
         """Forward pass on standardised inputs, standardised output (eqs. (38)-(41))."""
         lead = (None,) * (z.ndim - 1)  # the biases broadcast over the batch axes explicitly
         h = z
@@ -107,7 +109,7 @@ class Network(eqx.Module):
             h = jax.nn.sigmoid(h @ w + b[lead])  # eqs. (38)-(39)
         return (h @ self.weights[-1] + self.biases[-1][lead])[..., 0]  # eq. (40), linear output
 
-    def __call__(self, x: Float[ArrayLike, "... n_features"]) -> Float[Array, ...]:
+    def __call__(self, x: Float[ArrayLike, "... n_features"]) -> Float[Array, " ..."]:
         """Torque [N·m] for one input vector `(n_features,)` or a batch `(n, n_features)`."""
         lead = (None,) * (x.ndim - 1)  # one mean and scale per feature, for every batch row
         z = (x - self.x_mean[lead]) / self.x_scale[lead]
@@ -118,7 +120,9 @@ class Network(eqx.Module):
         return sum(int(w.size) + int(b.size) for w, b in zip(self.weights, self.biases))
 
 
-def standardise(network: Network, x, y) -> Network:
+def standardise(
+    network: Network, x: Real[ArrayLike, "m n_features"], y: Real[ArrayLike, " m"]
+) -> Network:
     """The network with its stored normalisation set from training inputs `x` and torques `y`.
 
     Columns of zero spread (a constant angle in a static test) get scale 1.

@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import compliance as hc, network as hn, plant
+from .._custom_types import PathLike, PRNGKeyArray
 from .._features import signals
 from .._joint import Joint
 from .._metrics import error_metrics
@@ -189,8 +190,8 @@ def _time_per_sample(fn, n: int, repeat: int = 3) -> float:
 def compare_methods(
     *,
     duration: float = 60.0,
-    train_key=None,
-    test_key=None,
+    train_key: PRNGKeyArray | None = None,
+    test_key: PRNGKeyArray | None = None,
     methods: tuple[str, ...] = METHOD_NAMES,
     scenarios: tuple[str, ...] | None = None,
     hidden: tuple[int, ...] = (32,),
@@ -345,7 +346,7 @@ def format_table(result: dict) -> str:
     return markdown_table(header + ["estimate [us/sample]"], rows)
 
 
-def plot_comparison(result: dict, path) -> None:
+def plot_comparison(result: dict, path: PathLike) -> None:
     """Grouped bars of RMS and maximum error (% of rated torque) per scenario and method."""
     plt = pyplot()
 

@@ -15,6 +15,7 @@ loop lets through), each after a 50 ms start-up.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import jax.numpy as jnp
@@ -100,7 +101,7 @@ class Comparison(NamedTuple):
 
 def compare_feedback(
     *,
-    dalpha_deg=DALPHA_DEG,
+    dalpha_deg: Sequence[float] = DALPHA_DEG,
     link_speed: float = 1.0,
     amplitude: float = 5.0,
     frequency: float = 20.0,

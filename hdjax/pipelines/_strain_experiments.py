@@ -212,7 +212,9 @@ def sine_tracking(
     return SineResult(run, float(np.sqrt(np.mean(err**2))), amp / amplitude, math.degrees(ph))
 
 
-def open_loop_error_friction(error_fraction: float, amplitude: float, ratio: float = 100.0):
+def open_loop_error_friction(
+    error_fraction: float, amplitude: float, ratio: float = 100.0
+) -> float:
     r"""Motor Coulomb friction $\tau_F$ that leaves an open-loop step with a given error.
 
     In the undamped model of eqs. (15)-(18) with $\dot T_J$ starting from rest, the first

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._custom_types import PathLike
 from .._errors import ConfigError
 from .._io import atomic_write_bytes
 from .._plotting import pyplot
@@ -67,7 +68,7 @@ def _pair_figure(title, open_run, closed_run, xlabel, x_of, y_label):
     return fig
 
 
-def reproduce_figures(out_dir, *, quick: bool = False) -> dict:
+def reproduce_figures(out_dir: PathLike, *, quick: bool = False) -> dict:
     """Write the reproduction figures and metrics into `out_dir`; return the metrics.
 
     **Arguments:**

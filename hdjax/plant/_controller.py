@@ -13,9 +13,10 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, Float
+from .._custom_types import Array, ArrayLike, Float
 from .._errors import ConfigError
 from ._effects import _concrete
+from ._params import PlantParams
 
 _f64 = lambda x: jnp.asarray(x, jnp.float64)
 
@@ -35,7 +36,17 @@ class ControllerGains(eqx.Module):
     inertia_ff: Float[Array, ""]
     torque_limit: Float[Array, ""]
 
-    def __call__(self, ratio, theta_ref, omega_ref, alpha_ref, theta_m, omega_m):
+    def __call__(
+        self,
+        ratio: Float[ArrayLike, ""],
+        theta_ref: Float[ArrayLike, " ..."],
+        omega_ref: Float[ArrayLike, " ..."],
+        alpha_ref: Float[ArrayLike, " ..."],
+        theta_m: Float[ArrayLike, " ..."],
+        omega_m: Float[ArrayLike, " ..."],
+    ) -> Float[Array, " ..."]:
+        """Motor torque command [N·m]: PD on the motor angle plus inertia feed-forward, within
+        the torque limit."""
         tau = (
             self.kp * (ratio * theta_ref - theta_m)
             + self.kd * (ratio * omega_ref - omega_m)
@@ -44,7 +55,13 @@ class ControllerGains(eqx.Module):
         return jnp.clip(tau, -self.torque_limit, self.torque_limit)
 
 
-def default_gains(params, *, bandwidth=None, damping_ratio=0.7, current_limit=None):
+def default_gains(
+    params: PlantParams,
+    *,
+    bandwidth: float | None = None,
+    damping_ratio: float = 0.7,
+    current_limit: float | None = None,
+) -> ControllerGains:
     r"""Gains for the bench controller computed once from nominal parameters (plain Python).
 
     The closed-loop bandwidth defaults to $\min(100, 0.35\,\omega_j)$ rad/s, with

@@ -40,6 +40,8 @@ The torque sensor sits between the output bearing and the link: $T_{sensor} = T_
 
 from __future__ import annotations
 
+from typing import Any
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -47,6 +49,10 @@ import jax.numpy as jnp
 from .._custom_types import Array, ArrayLike, Float
 from ..effects import WG_COMPLIANCE, in_slot
 from ._params import PlantParams
+
+Reciprocals = dict[str, Any]
+"""`reciprocals(params)`: the inverses of the scale parameters (arrays), and per effect its own
+(a dict by effect name)."""
 
 _f64 = lambda x: jnp.asarray(x, jnp.float64)
 
@@ -63,22 +69,22 @@ class PlantState(eqx.Module):
     - `temperature`: joint temperature [°C] (constant when `temperature` is off).
     """
 
-    theta_m: Float[Array, ...]
-    omega_m: Float[Array, ...]
-    theta_l: Float[Array, ...]
-    omega_l: Float[Array, ...]
-    current: Float[Array, ...]
-    z: Float[Array, ...]
-    temperature: Float[Array, ...]
+    theta_m: Float[Array, " ..."]
+    omega_m: Float[Array, " ..."]
+    theta_l: Float[Array, " ..."]
+    omega_l: Float[Array, " ..."]
+    current: Float[Array, " ..."]
+    z: Float[Array, " ..."]
+    temperature: Float[Array, " ..."]
 
 
-def zero_state(temperature=25.0) -> PlantState:
+def zero_state(temperature: Float[ArrayLike, ""] = 25.0) -> PlantState:
     """A state at rest at the origin (no deflection, no current)."""
     z = jnp.zeros((), jnp.float64)
     return PlantState(z, z, z, z, z, z, _f64(temperature))
 
 
-def reciprocals(params: PlantParams) -> dict:
+def reciprocals(params: PlantParams) -> Reciprocals:
     """Inverses of the scale parameters, computed once outside the time loop.
 
     Dividing by a traced parameter inside `lax.scan` keeps XLA from fusing the step (a division is
@@ -133,7 +139,7 @@ def _one(params, slot: str):
 
 
 def flexspline_deflection(
-    params: PlantParams, torque: Float[ArrayLike, "*batch"], *, inv=None
+    params: PlantParams, torque: Float[ArrayLike, "*batch"], *, inv: Reciprocals | None = None
 ) -> Float[Array, "*batch"]:
     r"""Flexspline deformation $\Delta\theta_f(T)$ [rad], Song et al. eq. (7).
 
@@ -177,7 +183,12 @@ def _flexspline_slope(params: PlantParams, torque, inv):
 
 
 def flexspline_inverse(
-    params: PlantParams, deflection: Float[ArrayLike, "*batch"], *, scale=1.0, extra=0.0, inv=None
+    params: PlantParams,
+    deflection: Float[ArrayLike, "*batch"],
+    *,
+    scale: Float[ArrayLike, " ..."] = 1.0,
+    extra: Float[ArrayLike, " ..."] = 0.0,
+    inv: Reciprocals | None = None,
 ) -> Float[Array, "*batch"]:
     r"""Inverse of eq. (7): torque [N·m] from flexspline deformation, Song et al. eq. (27).
 
@@ -246,9 +257,9 @@ def _thermal(params: PlantParams, temperature):
 def compliance_deflection(
     params: PlantParams,
     torque: Float[ArrayLike, "*batch"],
-    temperature: Float[ArrayLike, ...],
+    temperature: Float[ArrayLike, " ..."],
     *,
-    inv=None,
+    inv: Reciprocals | None = None,
 ) -> Float[Array, "*batch"]:
     r"""Elastic part of the deflection, $G(T) = s\Delta\theta_f(T) + \Delta\theta_{wg}(T/N)/N
     + b(T)$.
@@ -309,7 +320,9 @@ def _ripple_stiffness(params: PlantParams, state: PlantState, inv):
     return 1.0 if change is None else 1.0 / (1.0 + change)
 
 
-def effective_deflection(params: PlantParams, state: PlantState, *, inv=None):
+def effective_deflection(
+    params: PlantParams, state: PlantState, *, inv: Reciprocals | None = None
+) -> Float[Array, " ..."]:
     r"""$d_{eff} = d - \theta_{err} - \beta\Delta\vartheta$: the deflection the springs carry."""
     inv = _inv(params, inv)
     d = state.theta_m * inv["ratio"] - state.theta_l
@@ -321,7 +334,7 @@ def effective_deflection(params: PlantParams, state: PlantState, *, inv=None):
     return d
 
 
-def elastic_torque(params: PlantParams, d_eff, temperature, *, inv=None):
+def elastic_torque(params: PlantParams, d_eff, temperature, *, inv: Reciprocals | None = None):
     r"""Solve $G(T_s) = d_{eff}$ for the elastic torque $T_s$ [N·m].
 
     Closed form (eq. (27)) when the series compliance is piecewise linear (the flexspline, with the
@@ -343,7 +356,9 @@ def elastic_torque(params: PlantParams, d_eff, temperature, *, inv=None):
     return torque
 
 
-def flexspline_torque(params: PlantParams, state: PlantState, *, inv=None):
+def flexspline_torque(
+    params: PlantParams, state: PlantState, *, inv: Reciprocals | None = None
+) -> Float[Array, " ..."]:
     r"""Transmitted joint torque $T_J$ [N·m] (Hashimoto eq. (17); Song's $T_f$).
 
     $T_J = T_s(d_{eff}) + \kappa_3 d_{eff}^3 + z + c\,\dot d$ (see the module docstring). In the
@@ -377,20 +392,22 @@ def _friction(params, inv, slot, omega):
 
 
 def motor_friction(
-    params: PlantParams, omega_m: Float[ArrayLike, "*batch"], *, inv=None
+    params: PlantParams, omega_m: Float[ArrayLike, "*batch"], *, inv: Reciprocals | None = None
 ) -> Float[Array, "*batch"]:
     """Motor-side friction $F_m(\\omega_m)$ [N·m] (Coulomb, viscous, Stribeck; each if on)."""
     return _friction(params, _inv(params, inv), "motor_friction", omega_m)
 
 
 def output_friction(
-    params: PlantParams, omega_l: Float[ArrayLike, "*batch"], *, inv=None
+    params: PlantParams, omega_l: Float[ArrayLike, "*batch"], *, inv: Reciprocals | None = None
 ) -> Float[Array, "*batch"]:
     """Output-bearing friction $F_l(\\omega_l)$ [N·m] (Coulomb, viscous, Stribeck; each if on)."""
     return _friction(params, _inv(params, inv), "output_friction", omega_l)
 
 
-def sensor_torque(params: PlantParams, state: PlantState, *, inv=None):
+def sensor_torque(
+    params: PlantParams, state: PlantState, *, inv: Reciprocals | None = None
+) -> Float[Array, " ..."]:
     r"""Noiseless torque-sensor reading $T_J - F_l(\omega_l)$ [N·m] (sensor after the bearing)."""
     inv = _inv(params, inv)
     return flexspline_torque(params, state, inv=inv) - output_friction(
@@ -404,7 +421,12 @@ def sensor_torque(params: PlantParams, state: PlantState, *, inv=None):
 
 
 def derivatives(
-    params: PlantParams, state: PlantState, motor_torque, load_torque, *, inv=None
+    params: PlantParams,
+    state: PlantState,
+    motor_torque: Float[ArrayLike, " ..."],
+    load_torque: Float[ArrayLike, " ..."],
+    *,
+    inv: Reciprocals | None = None,
 ) -> PlantState:
     r"""Time derivative of the state (pure, jittable, vmappable).
 
@@ -474,7 +496,13 @@ def _materialise(tree, one):
 
 
 def rk4_step(
-    params: PlantParams, state: PlantState, motor_torque, load_torque, dt, *, inv=None
+    params: PlantParams,
+    state: PlantState,
+    motor_torque: Float[ArrayLike, " ..."],
+    load_torque: Float[ArrayLike, " ..."],
+    dt: Float[ArrayLike, ""],
+    *,
+    inv: Reciprocals | None = None,
 ) -> PlantState:
     r"""One classical Runge-Kutta step of length `dt` with inputs held over the step (ZOH).
 
@@ -524,7 +552,11 @@ def rk4_step(
 
 
 def equilibrium_state(
-    params: PlantParams, *, theta_l=0.0, load_torque=0.0, temperature=None
+    params: PlantParams,
+    *,
+    theta_l: Float[ArrayLike, " ..."] = 0.0,
+    load_torque: Float[ArrayLike, " ..."] = 0.0,
+    temperature: Float[ArrayLike, " ..."] | None = None,
 ) -> PlantState:
     r"""The state at rest holding a constant `load_torque` with the link at `theta_l`.
 

@@ -10,12 +10,15 @@ from pathlib import Path
 
 import numpy as np
 
+from .._custom_types import PathLike
 from .._errors import ConfigError, DataError
 from .._plotting import pyplot
 from .._recording import Recording
 
 
-def plot_scenario(recording: Recording, path, *, ratio: float = 160.0, title: str | None = None):
+def plot_scenario(
+    recording: Recording, path: PathLike, *, ratio: float = 160.0, title: str | None = None
+) -> Path:
     r"""Save a four-panel figure of a recording (Song et al. Figs. 2 and 9-12 in one).
 
     Panels: sensor torque, twist $\theta_l - \theta_m/N$ (Song eq. (5)) and current against time,

@@ -15,6 +15,7 @@ horizon while the simulation itself stays one continuous run.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax
@@ -23,6 +24,7 @@ import numpy as np
 import optax
 import optimistix as optx
 
+from .._custom_types import Array, Float
 from .._errors import ConfigError
 from .._recording import Recording
 from .._solution import RESULTS, Solution
@@ -87,7 +89,15 @@ def _with_values(params, names, values):
     return params
 
 
-def simulate_signals(params, gains, drive, dt, *, window: int | None = None, state0=None):
+def simulate_signals(
+    params: PlantParams,
+    gains: ControllerGains,
+    drive: Drive,
+    dt: float,
+    *,
+    window: int | None = None,
+    state0: PlantState | None = None,
+) -> tuple[Float[Array, " n"], Float[Array, " n"], Float[Array, " n"], Float[Array, " n"]]:
     """Noiseless recorded-frame signals (torque, current, twist, theta_l) over the drive.
 
     With `window`, the state's gradient is stopped every `window` steps (truncated
@@ -135,7 +145,7 @@ def fit_plant(
     params: PlantParams,
     recording: Recording,
     drive: Drive,
-    names,
+    names: Sequence[str],
     *,
     gains: ControllerGains,
     dt: float = 5e-4,

@@ -66,7 +66,7 @@ class PlantParams(eqx.Module):
     inertia_l: Float[Array, ""]
     torque_constant: Float[Array, ""]
     current_time_constant: Float[Array, ""]
-    compliance: Float[Array, 5]
+    compliance: Float[Array, " n_segments"]  # five (eq. (7)), checked in __check_init__
     damping: Float[Array, ""]
     corner: Float[Array, ""]
     effects: dict

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _trig
-from .._custom_types import Array, Float
+from .._custom_types import Array, ArrayLike, Float, PRNGKeyArray, PyTree, Real
 from .._errors import ConfigError, DivergenceError
 from .._recording import Recording, make_recording
 from ..effects import in_slot
@@ -200,7 +200,7 @@ def _initial(params, drive, gains):
 _initial_jit = eqx.filter_jit(_initial)
 
 
-def spread_batch(tree):
+def spread_batch(tree: PyTree) -> PyTree:
     r"""Place a batch (leading axis of every array leaf) across the local devices, evenly.
 
     A `vmap`-ed simulation is one XLA loop; on a CPU that loop runs on one core. When JAX has
@@ -351,12 +351,12 @@ def _sense(out: Outputs, t, key, motor_q, load_q, i_sigma, i_hold, tq_sigma, tem
 def to_recording(
     params: PlantParams,
     out: Outputs,
-    t,
+    t: Real[ArrayLike, " n"],
     *,
     sensors: SensorConfig,
-    key,
+    key: PRNGKeyArray,
     truth: bool = False,
-    theta_ref=None,
+    theta_ref: Float[Array, " n"] | None = None,
     source: str = "plant",
 ) -> Recording:
     """Turn noiseless outputs into a recording through the sensor models (plain Python)."""
@@ -421,7 +421,7 @@ def simulate(
     params: PlantParams,
     drive: Drive,
     *,
-    key,
+    key: PRNGKeyArray,
     dt: float = 5e-4,
     output_period: float = 5e-4,
     sensors: SensorConfig | None = None,

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._custom_types import ArrayLike, Bool, Float, PathLike, Real
 from .._errors import DataError
 from ._dh import DHArm, load_dh_table
 from ._holds import Holds, detect_holds
@@ -30,7 +31,14 @@ from ._offset import SensorOffset, fit_offset_with_payload, no_offset, offset_fr
 from ._urdf import UrdfArm
 
 
-def joint_torque(jac_column, wrench, tau_model=None, *, sign: int = 1, offset=None) -> np.ndarray:
+def joint_torque(
+    jac_column: Real[ArrayLike, "n 6"],
+    wrench: Real[ArrayLike, "n 6"],
+    tau_model: Real[ArrayLike, " n"] | None = None,
+    *,
+    sign: int = 1,
+    offset: Real[ArrayLike, " 6"] | None = None,
+) -> Float[np.ndarray, " n"]:
     r"""$\tau = \tau_\text{model} + s\,J_j^\top (W - w_0)$ per sample (module docstring).
 
     **Arguments:** `jac_column` `(n, 6)`, `wrench` `(n, 6)` in the same frame, `tau_model`
@@ -52,10 +60,10 @@ class WrenchReference:
     each at the fresh rows; `fresh` (bool per input row), `holds`, `offset`, `description`.
     """
 
-    torque: np.ndarray
-    external: np.ndarray
-    model: np.ndarray
-    fresh: np.ndarray
+    torque: Float[np.ndarray, " n_fresh"]
+    external: Float[np.ndarray, " n_fresh"]
+    model: Float[np.ndarray, " n_fresh"]
+    fresh: Bool[np.ndarray, " n"]
     holds: Holds
     offset: SensorOffset
     description: str
@@ -86,7 +94,12 @@ def _arm(spec: Mapping, base_dir: Path):
 
 
 def build_wrench_reference(
-    spec: Mapping, columns: Mapping[str, np.ndarray], t, *, base_dir=".", source: str = "log"
+    spec: Mapping,
+    columns: Mapping[str, Real[ArrayLike, " n"]],
+    t: Real[ArrayLike, " n"],
+    *,
+    base_dir: PathLike = ".",
+    source: str = "log",
 ) -> WrenchReference:
     """Build the reference of a validated `[data.reference]` table of kind `"wrench"`.
 

@@ -23,14 +23,14 @@ and 4.6; Craig, *Introduction to Robotics* (2005), Section 3.4.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, ArrayLike, Float
+from .._custom_types import Array, ArrayInput, ArrayLike, Float, PathLike, Real
 from .._errors import ConfigError, check_keys, did_you_mean
 from .._io import read_toml
 
@@ -38,7 +38,14 @@ CONVENTIONS = ("standard", "modified")
 _TABLE_KEYS = ("name", "convention", "angle_unit", "links", "tool", "source")
 
 
-def link_transform(a, alpha, d, theta, *, modified: bool = False) -> Float[Array, "4 4"]:
+def link_transform(
+    a: Real[ArrayLike, ""],
+    alpha: Real[ArrayLike, ""],
+    d: Real[ArrayLike, ""],
+    theta: Real[ArrayLike, ""],
+    *,
+    modified: bool = False,
+) -> Float[Array, "4 4"]:
     r"""One link's homogeneous transform $T_{i-1,i}$ (see the module docstring), in closed form.
 
     **Arguments:** `a` [m], `alpha` [rad], `d` [m], `theta` [rad] (offset plus joint angle);
@@ -63,7 +70,7 @@ def link_transform(a, alpha, d, theta, *, modified: bool = False) -> Float[Array
     return jnp.stack([jnp.stack(r) for r in rows])
 
 
-def rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
+def rpy_matrix(roll: float, pitch: float, yaw: float) -> Float[np.ndarray, "3 3"]:
     """$R_z(\\text{yaw}) R_y(\\text{pitch}) R_x(\\text{roll})$, the URDF `rpy` convention."""
     cr, sr, cp, sp, cy, sy = (f(v) for v in (roll, pitch, yaw) for f in (math.cos, math.sin))
     rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
@@ -103,11 +110,11 @@ class DHArm(eqx.Module):
 
 
 def dh_arm(
-    links,
+    links: ArrayInput,
     *,
     convention: str = "standard",
-    tool_xyz=(0.0, 0.0, 0.0),
-    tool_rpy=(0.0, 0.0, 0.0),
+    tool_xyz: Real[ArrayLike, " 3"] | Sequence[float] = (0.0, 0.0, 0.0),
+    tool_rpy: Real[ArrayLike, " 3"] | Sequence[float] = (0.0, 0.0, 0.0),
     name: str = "arm",
 ) -> DHArm:
     """A [`hdjax.reference.DHArm`][] from rows `(a, alpha, d, theta_offset)` (radians)."""
@@ -126,7 +133,9 @@ def dh_arm(
     return DHArm(f(0), f(1), f(2), f(3), jnp.asarray(tool), convention=convention, name=name)
 
 
-def forward_kinematics(arm: DHArm, q: Float[ArrayLike, " n_joints"]):
+def forward_kinematics(
+    arm: DHArm, q: Float[ArrayLike, " n_joints"]
+) -> tuple[Float[Array, "n_joints 4 4"], Float[Array, "4 4"]]:
     r"""Joint-axis frames and the tool pose of `arm` at joint angles `q`.
 
     **Returns:** `(axes, tool)`: `axes[i]` is the 4x4 base-frame pose of the frame whose $z$
@@ -210,7 +219,7 @@ def dh_arm_from_table(table: Mapping, *, where: str = "[arm]") -> DHArm:
     )
 
 
-def load_dh_table(path) -> DHArm:
+def load_dh_table(path: PathLike) -> DHArm:
     """Read a DH arm from the `[arm]` table of a TOML file.
 
     ```toml

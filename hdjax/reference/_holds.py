@@ -15,6 +15,7 @@ import dataclasses
 
 import numpy as np
 
+from .._custom_types import ArrayLike, Bool, Real
 from .._errors import DataError
 
 
@@ -26,7 +27,7 @@ class Holds:
     `median_period_s` and `max_period_s` (time between fresh rows).
     """
 
-    fresh: np.ndarray
+    fresh: Bool[np.ndarray, " n"]
     n_fresh: int
     n_rows: int
     median_period_s: float
@@ -48,7 +49,9 @@ class Holds:
         )
 
 
-def detect_holds(values, t, *, source: str = "wrench") -> Holds:
+def detect_holds(
+    values: Real[ArrayLike, "n_rows k"], t: Real[ArrayLike, " n"], *, source: str = "wrench"
+) -> Holds:
     """The fresh rows of a sample-and-hold stream (module docstring).
 
     **Arguments:** `values` of shape `(n, k)` (e.g. the six wrench channels), time stamps `t`

@@ -74,7 +74,7 @@ def _columns_base(arm, q, joint):
 
 
 def jacobian_columns(
-    arm: DHArm, q: Float[ArrayLike, ...], joint: int, *, frame: str = "tool"
+    arm: DHArm, q: Float[ArrayLike, " ..."], joint: int, *, frame: str = "tool"
 ) -> Float[Array, "n_samples 6"]:
     """Column `joint` (0-based) of the Jacobian at every sample of `q`, one jitted call."""
     _check_frame(frame)
@@ -90,7 +90,7 @@ def _rotations(arm, q):
     return jax.vmap(lambda qk: forward_kinematics(arm, qk)[1][:3, :3])(q)
 
 
-def tool_rotations(arm: DHArm, q: Float[ArrayLike, ...]) -> Float[Array, "n_samples 3 3"]:
+def tool_rotations(arm: DHArm, q: Float[ArrayLike, " ..."]) -> Float[Array, "n_samples 3 3"]:
     """The tool frame's base-frame orientation $R$ at every sample of `q`."""
     q = _angles(arm, q)
     return _rotations(arm, q)
@@ -107,7 +107,7 @@ def _all_base(arm, q):
 
 
 def jacobians(
-    arm: DHArm, q: Float[ArrayLike, ...], *, frame: str = "tool"
+    arm: DHArm, q: Float[ArrayLike, " ..."], *, frame: str = "tool"
 ) -> Float[Array, "n_samples 6 n_joints"]:
     """The whole Jacobian at every sample of `q`, one jitted call."""
     _check_frame(frame)

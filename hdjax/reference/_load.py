@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._custom_types import PathLike
 from .._errors import ConfigError
 from .._io import ColumnMap, ColumnSpec, load_recording
 from .._recording import Recording
@@ -34,12 +35,12 @@ def describe_column_reference(columns: ColumnMap | Mapping | None, data_kind: st
 
 
 def load_with_reference(
-    path,
+    path: PathLike,
     columns: ColumnMap,
     spec: Mapping,
     loader: Callable[..., Recording],
     *,
-    base_dir,
+    base_dir: PathLike,
     check_units: bool = True,
 ) -> tuple[Recording, WrenchReference]:
     """Load `path` through `loader(path, columns, check_units=...)` and replace its torque by
@@ -77,7 +78,14 @@ def load_with_reference(
     return rec, ref
 
 
-def load_referenced(path, columns: ColumnMap | None, table, *, base_dir, where: str = "[data]"):
+def load_referenced(
+    path: PathLike,
+    columns: ColumnMap | None,
+    table: Mapping | None,
+    *,
+    base_dir: PathLike,
+    where: str = "[data]",
+) -> tuple[Recording, str]:
     """Load a recording with the reference a `[data.reference]` table (or `None`) describes.
 
     **Returns:** `(recording, description)`, the description being one line for reports.

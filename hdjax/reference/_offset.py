@@ -26,9 +26,11 @@ The offset is always reported, with how it was obtained.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 
+from .._custom_types import ArrayLike, Float, Real
 from .._errors import CalibrationError, DataError
 
 
@@ -45,13 +47,13 @@ class SensorOffset:
     """
 
     method: str
-    wrench: np.ndarray
+    wrench: Float[np.ndarray, " 6"]
     n_samples: int = 0
     mass: float | None = None
-    com: np.ndarray | None = None
-    residual_rms: np.ndarray | None = None
+    com: Float[np.ndarray, " 3"] | None = None
+    residual_rms: Float[np.ndarray, " 6"] | None = None
     window: tuple[float, float] | None = None
-    stderr: np.ndarray | None = None
+    stderr: Float[np.ndarray, " 6"] | None = None
 
     def describe(self) -> str:
         if self.method == "none":
@@ -88,7 +90,9 @@ def no_offset() -> SensorOffset:
     return SensorOffset("none", np.zeros(6))
 
 
-def offset_from_rest(wrench, t, window: tuple[float, float]) -> SensorOffset:
+def offset_from_rest(
+    wrench: Real[ArrayLike, "n_rows 6"], t: Real[ArrayLike, " n"], window: tuple[float, float]
+) -> SensorOffset:
     """Mean of the readings with `window[0] <= t - t[0] <= window[1]` (module docstring).
 
     Pass only fresh rows (see [`hdjax.reference.detect_holds`][]) so that held repeats do
@@ -119,7 +123,11 @@ def _skew(v: np.ndarray) -> np.ndarray:
     )
 
 
-def fit_offset_with_payload(wrench, rotations, gravity=(0.0, 0.0, -9.80665)) -> SensorOffset:
+def fit_offset_with_payload(
+    wrench: Real[ArrayLike, "n 6"],
+    rotations: Real[ArrayLike, "n 3 3"],
+    gravity: Real[ArrayLike, " 3"] | Sequence[float] = (0.0, 0.0, -9.80665),
+) -> SensorOffset:
     """Fit the offset and a payload's static wrench (module docstring) by least squares.
 
     **Arguments:** `wrench` `(n, 6)` in the sensor frame (fresh rows only), `rotations`

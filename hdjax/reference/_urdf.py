@@ -13,15 +13,18 @@ Body Dynamics Algorithms* (2008), Section 5.3.
 
 from __future__ import annotations
 
+import types
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
+from .._custom_types import ArrayLike, Float, PathLike, Real
 from .._errors import ConfigError, did_you_mean
 from ._jacobian import FRAMES
 
 
-def import_pinocchio():
+def import_pinocchio() -> types.ModuleType:
     """The `pinocchio` module, or a [`hdjax.ConfigError`][] saying how to install it."""
     try:
         import pinocchio
@@ -47,7 +50,13 @@ class UrdfArm:
     URDF has) or joints other than revolute/prismatic.
     """
 
-    def __init__(self, path, frame: str, *, gravity=(0.0, 0.0, -9.80665)):
+    def __init__(
+        self,
+        path: PathLike,
+        frame: str,
+        *,
+        gravity: Real[ArrayLike, " 3"] | Sequence[float] = (0.0, 0.0, -9.80665),
+    ) -> None:
         pin = import_pinocchio()
         self.path = Path(path)
         if not self.path.exists():
@@ -90,7 +99,9 @@ class UrdfArm:
             )
         return q
 
-    def jacobian(self, q, *, frame: str = "tool") -> np.ndarray:
+    def jacobian(
+        self, q: Real[ArrayLike, " n_q"], *, frame: str = "tool"
+    ) -> Float[np.ndarray, "6 n_v"]:
         """The 6 x n frame Jacobian at `q` (linear rows first), in `"tool"` or `"base"` axes."""
         if frame not in FRAMES:
             raise ConfigError(f"Jacobian frame must be one of {', '.join(FRAMES)}, got {frame!r}")
@@ -102,14 +113,16 @@ class UrdfArm:
             pin.computeFrameJacobian(self.model, self.data, self._q(q), self.frame_id, ref)
         )
 
-    def jacobian_columns(self, q, joint: int, *, frame: str = "tool") -> np.ndarray:
+    def jacobian_columns(
+        self, q: Real[ArrayLike, "n_samples n_q"], joint: int, *, frame: str = "tool"
+    ) -> Float[np.ndarray, "n_samples 6"]:
         """Column `joint` (0-based) of the Jacobian at every row of `q`: shape (n, 6)."""
         q = self._q(q)
         if not 0 <= joint < self.n_joints:
             raise ConfigError(f"joint index {joint} outside 0..{self.n_joints - 1}")
         return np.stack([self.jacobian(qk, frame=frame)[:, joint] for qk in q])
 
-    def tool_rotation(self, q) -> np.ndarray:
+    def tool_rotation(self, q: Real[ArrayLike, "... n_q"]) -> Float[np.ndarray, "n_samples 3 3"]:
         """The tool frame's base-frame orientation at every row of `q`: shape (n, 3, 3)."""
         pin = self._pin
         out = []
@@ -118,7 +131,12 @@ class UrdfArm:
             out.append(np.array(self.data.oMf[self.frame_id].rotation))
         return np.stack(out)
 
-    def rnea(self, q, v, a) -> np.ndarray:
+    def rnea(
+        self,
+        q: Real[ArrayLike, "... n_q"] | Sequence[float],
+        v: Real[ArrayLike, "... n_v"] | Sequence[float],
+        a: Real[ArrayLike, "... n_v"] | Sequence[float],
+    ) -> Float[np.ndarray, "n_samples n_v"]:
         r"""$\tau = M(q)\ddot q + C(q,\dot q)\dot q + g(q)$ at every row: shape (n, n_joints)."""
         pin = self._pin
         q, v, a = (self._q(np.atleast_2d(x)) for x in (q, v, a))

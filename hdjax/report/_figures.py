@@ -6,8 +6,12 @@ matplotlib is imported lazily (Agg backend), so `import hdjax` stays light.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 
+from .._custom_types import ArrayLike, Real
 from .._plotting import png_bytes, pyplot
 
 _METHOD_LABEL = {"model": "model-based (eqs. 7-10, 26-27)", "network": "BP network (eqs. 36-46)"}
@@ -19,7 +23,7 @@ _plt = pyplot
 _png = png_bytes
 
 
-def _envelope(err: np.ndarray, limit: int = 6000) -> np.ndarray:
+def _envelope(err, limit: int = 6000):
     """Indices to plot: per chunk of samples the first one and the one of largest |error|, so
     a decimated plot keeps every spike."""
     n = err.size
@@ -32,7 +36,13 @@ def _envelope(err: np.ndarray, limit: int = 6000) -> np.ndarray:
 
 
 def torque_figure(
-    t, measured, estimated, *, title: str, rated: float | None = None, errors=None
+    t: Real[ArrayLike, " n"],
+    measured: Real[ArrayLike, " n"],
+    estimated: Real[ArrayLike, " n"],
+    *,
+    title: str,
+    rated: float | None = None,
+    errors: tuple[float, float] | None = None,
 ) -> bytes:
     """Estimated against measured torque with the error below (as Song et al. Figs. 9-16).
 
@@ -135,7 +145,9 @@ def error_rate_figure(metrics: dict, *, paper: dict | None = None, rated: float)
     return _png(fig)
 
 
-def find_knee(x, y) -> int | None:
+def find_knee(
+    x: Real[ArrayLike, " n"] | Sequence[float], y: Real[ArrayLike, " n"] | Sequence[float]
+) -> int | None:
     """Index of the knee of a decreasing error curve (largest distance below the chord).
 
     Both axes are scaled to [0, 1]; the knee is the point farthest below the straight line from
@@ -162,7 +174,15 @@ def find_knee(x, y) -> int | None:
     return int(idx[k]) if below[k] > 1e-12 else None
 
 
-def sweep_figure(values, error, seconds, *, setting: str, knee: int | None, metric: str) -> bytes:
+def sweep_figure(
+    values: Sequence[Any],
+    error: Real[ArrayLike, " n"] | Sequence[float],
+    seconds: Real[ArrayLike, " n"] | Sequence[float],
+    *,
+    setting: str,
+    knee: int | None,
+    metric: str,
+) -> bytes:
     """Held-out error and compute time against a swept setting, with the knee marked.
 
     **Returns:** PNG bytes.

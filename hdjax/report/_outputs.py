@@ -21,6 +21,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from .. import __version__
+from .._custom_types import PathLike
 from .._errors import ConfigError
 
 MARKER = ".hdjax-result"
@@ -37,7 +38,7 @@ def _within(inner: Path, outer: Path) -> bool:
     return inner == outer or outer in inner.parents
 
 
-def check_not_input(out, inputs: Iterable, *, flag: str = "--out") -> None:
+def check_not_input(out: PathLike, inputs: Iterable, *, flag: str = "--out") -> None:
     """Refuse an output that is an input, holds an input or lies inside one.
 
     **Arguments:**
@@ -94,7 +95,7 @@ def _describe(folder: Path) -> str:
     return shown + (f" and {len(names) - 4} more" if len(names) > 4 else "")
 
 
-def read_marker(folder) -> dict | None:
+def read_marker(folder: PathLike) -> dict | None:
     """The marker of an hdjax result folder, or `None` when `folder` holds none."""
     p = Path(folder) / MARKER
     if not p.is_file() or p.is_symlink():
@@ -131,7 +132,7 @@ def _files_under(folder: Path) -> set[str]:
 
 
 def check_output_dir(
-    out, *, inputs: Iterable = (), overwrite: bool = False, flag: str = "--out"
+    out: PathLike, *, inputs: Iterable = (), overwrite: bool = False, flag: str = "--out"
 ) -> str:
     """Check that `out` may receive a result folder; returns `"new"`, `"empty"` or `"result"`.
 
@@ -188,7 +189,7 @@ def check_output_dir(
 
 
 def check_output_file(
-    out,
+    out: PathLike,
     *,
     inputs: Iterable = (),
     overwrite: bool = False,

@@ -17,12 +17,14 @@ import math
 import os
 import platform
 import shutil
+from collections.abc import Iterable
 from pathlib import Path
 
 import jax
 
 # `_io.atomic_write_bytes` is looked up at each call, so that a test can stand a full disk in
 from .. import __version__, _io
+from .._custom_types import PathLike
 from .._errors import ConfigError
 from .._interrupts import check, critical
 from ._outputs import MARKER, check_not_input, check_output_dir, marker_bytes, read_marker
@@ -90,14 +92,14 @@ class ResultDir:
 
     def __init__(
         self,
-        out,
+        out: PathLike,
         *,
         overwrite: bool = False,
-        inputs=(),
-        staging=None,
-        keep_staging_on_error=False,
+        inputs: Iterable[PathLike | None] = (),
+        staging: PathLike | None = None,
+        keep_staging_on_error: bool = False,
         command: str = "hdjax",
-    ):
+    ) -> None:
 
         self.out = Path(out)
         self.inputs = tuple(p for p in inputs if p is not None)

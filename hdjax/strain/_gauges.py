@@ -21,7 +21,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, ArrayLike, Float, Scalar
+from .._custom_types import Array, ArrayLike, Float, Real, Scalar
 from .._errors import ConfigError
 
 # Paper values (Section III-A/B).
@@ -118,7 +118,9 @@ def strain_per_torque_appendix(geometry: FlexsplineGeometry) -> Float[Array, ""]
     return alpha_d_per_torque / 2.0  # eq. (A6)
 
 
-def torsional_strain(geometry: FlexsplineGeometry, torque: ArrayLike) -> Float[Array, ...]:
+def torsional_strain(
+    geometry: FlexsplineGeometry, torque: Real[ArrayLike, " ..."]
+) -> Float[Array, " ..."]:
     r"""Torsional gauge strain $\epsilon_t$ under a torque $T$ [N·m], eq. (7)."""
     return jnp.asarray(torque, jnp.float64) * strain_per_torque(geometry)
 
@@ -151,18 +153,18 @@ def resolved_torque_gain(
 class GaugeStrains(NamedTuple):
     """Strains of the four active gauges R1-R4 (Fig. 9(a)), each shaped like the inputs."""
 
-    e1: Array
-    e2: Array
-    e3: Array
-    e4: Array
+    e1: Float[Array, " ..."]
+    e2: Float[Array, " ..."]
+    e3: Float[Array, " ..."]
+    e4: Float[Array, " ..."]
 
 
 def gauge_strains(
-    eps_t: ArrayLike,
-    beta: ArrayLike,
+    eps_t: Real[ArrayLike, " ..."],
+    beta: Real[ArrayLike, " ..."],
     psi0: Scalar = PSI0_PAPER,
-    dalpha: ArrayLike = 0.0,
-    common: ArrayLike = 0.0,
+    dalpha: Real[ArrayLike, " ..."] = 0.0,
+    common: Real[ArrayLike, " ..."] = 0.0,
 ) -> GaugeStrains:
     r"""Strains on the four gauges, eqs. (1)-(4) and (9).
 
@@ -208,7 +210,7 @@ def bridge_output(
     supply: Scalar = 3.0,
     *,
     linear: bool = True,
-) -> Float[Array, ...]:
+) -> Float[Array, " ..."]:
     r"""Output voltage of the four-active-gauge Wheatstone bridge, eq. (5).
 
     Linear (the paper's eq. (5)):
@@ -229,13 +231,13 @@ def bridge_output(
 class Ripple(NamedTuple):
     """Residual modulation $\\Psi\\sin(2\\beta + \\gamma)$ of the bridge sum, eqs. (10)-(12)."""
 
-    amplitude: Array
+    amplitude: Float[Array, " ..."]
     """$\\Psi = 2\\Psi_0|\\sin\\Delta\\alpha|$ [strain], eq. (12)."""
-    phase: Array
+    phase: Float[Array, " ..."]
     """$\\gamma$ [rad], eq. (11)."""
 
 
-def residual_ripple(dalpha: ArrayLike, psi0: Scalar = PSI0_PAPER) -> Ripple:
+def residual_ripple(dalpha: Real[ArrayLike, " ..."], psi0: Scalar = PSI0_PAPER) -> Ripple:
     r"""Residual ripple left by a gauge misalignment $\Delta\alpha$, eqs. (10)-(12).
 
     $$\epsilon_1 + \epsilon_3 - \epsilon_2 - \epsilon_4 = 4\epsilon_t + \Psi\sin(2\beta+\gamma),
@@ -258,8 +260,8 @@ def residual_ripple(dalpha: ArrayLike, psi0: Scalar = PSI0_PAPER) -> Ripple:
 
 
 def misalignment_error_index(
-    dalpha: ArrayLike, psi0: Scalar = PSI0_PAPER, eps_rated: Scalar = EPS_RATED_PAPER
-) -> Float[Array, ...]:
+    dalpha: Real[ArrayLike, " ..."], psi0: Scalar = PSI0_PAPER, eps_rated: Scalar = EPS_RATED_PAPER
+) -> Float[Array, " ..."]:
     r"""Sensing inaccuracy index $E_R$ from a gauge misalignment, eq. (13).
 
     $$E_R = \frac{\Psi}{4\epsilon_t^R} = \frac{\Psi_0|\sin\Delta\alpha|}{2\epsilon_t^R},$$

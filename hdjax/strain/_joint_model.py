@@ -19,7 +19,7 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, Float, Scalar
+from .._custom_types import Array, ArrayLike, Float, Real, Scalar
 from .._errors import ConfigError
 from ._control import TABLE_I
 
@@ -61,10 +61,12 @@ class IdealJoint(eqx.Module):
         """Whether the link is immobilised (infinite link inertia)."""
         return math.isinf(self.link_inertia)
 
-    def initial_state(self) -> Float[Array, 4]:
+    def initial_state(self) -> Float[Array, " 4"]:
         return jnp.zeros(4, jnp.float64)
 
-    def observe(self, state):
+    def observe(
+        self, state: Float[Array, " 4"]
+    ) -> tuple[Float[Array, ""], Float[Array, ""], Float[Array, ""]]:
         """Motor angle, link angle and joint torque $T_J$ (eq. (17))."""
         q_m, _, q_l, _ = state
         return q_m, q_l, self.stiffness * (q_m / self.ratio - q_l)
@@ -77,7 +79,9 @@ class IdealJoint(eqx.Module):
         a_l = torque / self.link_inertia  # eq. (15); 0 when J_L is infinite
         return jnp.stack([w_m, a_m, w_l, a_l])
 
-    def step(self, state, tau_m, dt):
+    def step(
+        self, state: Float[Array, " 4"], tau_m: Real[ArrayLike, ""], dt: Real[ArrayLike, ""]
+    ) -> Float[Array, " 4"]:
         """One classical Runge-Kutta step of length `dt` under motor torque `tau_m`."""
         k1 = self._rhs(state, tau_m)
         k2 = self._rhs(state + 0.5 * dt * k1, tau_m)

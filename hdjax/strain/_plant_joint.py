@@ -16,9 +16,9 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Scalar
+from .._custom_types import Array, ArrayLike, Float, Real, Scalar
 from .._errors import ConfigError
-from ..plant import PlantParams, flexspline_torque, rk4_step, zero_state
+from ..plant import PlantParams, PlantState, flexspline_torque, rk4_step, zero_state
 
 
 class PlantJoint(eqx.Module):
@@ -31,7 +31,7 @@ class PlantJoint(eqx.Module):
     - `load_torque`: external torque on the link [N·m] (free link only).
     """
 
-    params: object
+    params: object  # a PlantParams, checked in __check_init__ with a ConfigError
     constrained: bool = eqx.field(default=True, static=True)
     load_torque: Scalar = 0.0
 
@@ -41,13 +41,17 @@ class PlantJoint(eqx.Module):
                 f"PlantJoint.params must be hdjax.plant.PlantParams, got {type(self.params)}"
             )
 
-    def initial_state(self):
+    def initial_state(self) -> PlantState:
         return zero_state()
 
-    def observe(self, state):
+    def observe(
+        self, state: PlantState
+    ) -> tuple[Float[Array, " ..."], Float[Array, " ..."], Float[Array, " ..."]]:
         return state.theta_m, state.theta_l, flexspline_torque(self.params, state)
 
-    def step(self, state, tau_m, dt):
+    def step(
+        self, state: PlantState, tau_m: Real[ArrayLike, " ..."], dt: Real[ArrayLike, ""]
+    ) -> PlantState:
         new = rk4_step(self.params, state, tau_m, self.load_torque, dt)
         if self.constrained:
             new = eqx.tree_at(

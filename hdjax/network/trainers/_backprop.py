@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._custom_types import PRNGKeyArray
+from ..._custom_types import Array, ArrayLike, Float, PRNGKeyArray, Real, Scalar
 from ..._errors import ConfigError, DivergenceError
 from ..._solution import Solution
 from .._mlp import Network
@@ -35,7 +35,14 @@ from ._result import check_count, check_rate, prepare, train_solution
 _DIVERGENCE_FACTOR = 100.0
 
 
-def backprop_step(weights, biases, z, d, mu, eta):
+def backprop_step(
+    weights: tuple[Float[Array, "_n_in _n_out"], ...],
+    biases: tuple[Float[Array, " _n_out"], ...],
+    z: Float[Array, " n_features"],
+    d: Float[Array, " 1"],
+    mu: Scalar,
+    eta: Scalar,
+) -> tuple[tuple[Float[Array, "_n_in _n_out"], ...], tuple[Float[Array, " _n_out"], ...]]:
     r"""One learning on one standardised sample: forward, deltas, corrections (eqs. (38)-(46)).
 
     Written out by hand because the paper's update rule is the point; a test checks it against
@@ -100,8 +107,8 @@ def _train(weights, biases, z, t, zv, tv, key, mu, eta, target, check_every, n_c
 
 def train_backprop(
     network: Network,
-    x,
-    y,
+    x: Real[ArrayLike, "m n_features"],
+    y: Real[ArrayLike, " m"],
     *,
     mu: float,
     eta: float,
@@ -109,8 +116,8 @@ def train_backprop(
     max_learnings: int,
     key: PRNGKeyArray,
     check_every: int = 1000,
-    x_val=None,
-    y_val=None,
+    x_val: Real[ArrayLike, "m_val n_features"] | None = None,
+    y_val: Real[ArrayLike, " m_val"] | None = None,
     normalise: bool = True,
 ) -> Solution:
     r"""Train a network by the paper's per-sample back-propagation (Song et al. eqs. (36)-(46)).

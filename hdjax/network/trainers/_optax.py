@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ..._custom_types import PRNGKeyArray
+from ..._custom_types import ArrayLike, PRNGKeyArray, Real
 from ..._errors import ConfigError, DivergenceError
 from ..._solution import Solution
 from .._mlp import Network
@@ -78,8 +78,8 @@ def _train(network, z, t, zv, tv, key, lr, target, factory, batch, eval_every, n
 
 def train_optax(
     network: Network,
-    x,
-    y,
+    x: Real[ArrayLike, "m n_features"],
+    y: Real[ArrayLike, " m"],
     *,
     learning_rate: float,
     steps: int,
@@ -87,8 +87,8 @@ def train_optax(
     optimizer: str | Callable[[float], optax.GradientTransformation] = "adam",
     batch_size: int | None = None,
     eval_every: int = 100,
-    x_val=None,
-    y_val=None,
+    x_val: Real[ArrayLike, "m_val n_features"] | None = None,
+    y_val: Real[ArrayLike, " m_val"] | None = None,
     target_rmse: float | None = None,
     normalise: bool = True,
 ) -> Solution:
