@@ -47,6 +47,7 @@ from .._recording import Recording
 from .._solution import RESULTS, Solution
 from ._model import ComplianceModel
 from ._signals import Signals
+from ._stream import scaled_cho_factor
 
 CalibrationData = Recording | tuple[Signals, Float[ArrayLike, " n"]]
 """What a calibration reads: a recording with a reference torque, or `(signals, torque)`."""
@@ -177,29 +178,6 @@ class _SegmentedDesign:
         return r, atr
 
 
-def scaled_cholesky(gs: np.ndarray):
-    """The Cholesky factor of a Jacobi-scaled Gram matrix `gs` (unit diagonal), when the
-    semi-normal equations may use it.
-
-    **Returns:** `(factor, cond)`, with `factor` scipy's `cho_factor` pair (upper) and `cond`
-    the scaled condition number $\\sqrt{\\lambda_{max} / \\lambda_{min}}$; or `None` when `gs`
-    is not positive definite, `cond` exceeds `CSNE_MAX_COND`, or Cholesky fails (then QR
-    decides rank and solution).
-    """
-    import scipy.linalg
-
-    ev = np.linalg.eigvalsh(gs)
-    if not ev[0] > 0:
-        return None
-    cond = float(np.sqrt(ev[-1] / ev[0]))
-    if not cond <= CSNE_MAX_COND:
-        return None
-    try:
-        return scipy.linalg.cho_factor(gs, lower=False, check_finite=False), cond
-    except np.linalg.LinAlgError:
-        return None
-
-
 def _csne(design: _SegmentedDesign, b, g: np.ndarray, atb: np.ndarray, active: np.ndarray):
     """Corrected semi-normal equations on the scaled Gram matrix, or `None` when the scaled
     condition number exceeds `CSNE_MAX_COND` (then QR decides rank and solution)."""
@@ -207,7 +185,7 @@ def _csne(design: _SegmentedDesign, b, g: np.ndarray, atb: np.ndarray, active: n
 
     d = np.sqrt(np.diag(g)[active])
     gs = g[np.ix_(active, active)] / np.outer(d, d)
-    chol = scaled_cholesky(gs)
+    chol = scaled_cho_factor(gs, CSNE_MAX_COND)
     if chol is None:
         return None
     factor, cond = chol

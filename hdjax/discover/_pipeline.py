@@ -28,7 +28,8 @@ from .._errors import InversionError
 from .._recording import Recording
 from ..compliance import ComplianceModel, Signals, calibrate_lstsq, signals_from_recording
 from ..compliance._inversion import _estimate
-from ..compliance._lstsq import _design, scaled_cholesky
+from ..compliance._lstsq import CSNE_MAX_COND, _design
+from ..compliance._stream import scaled_cho_factor
 from ..effects import SEGMENT_START, TORQUE_PATH
 from ._folds import segment_starts
 
@@ -237,7 +238,9 @@ class FoldSolver:
         g = self.g[np.ix_(keep, keep)] - at.T @ at
         aty = self.aty[keep] - at.T @ y[te]
         d = np.sqrt(np.maximum(np.diag(g), 0.0))
-        chol = scaled_cholesky(g / np.outer(d, d)) if d.size and np.all(d > 0) else None
+        chol = None
+        if d.size and np.all(d > 0):
+            chol = scaled_cho_factor(g / np.outer(d, d), CSNE_MAX_COND)
         if chol is None:
             train_rows = np.ones(a.shape[0], bool)
             train_rows[te] = False

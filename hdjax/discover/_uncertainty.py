@@ -31,7 +31,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..compliance import ComplianceModel
-from ..compliance._lstsq import scaled_cholesky
+from ..compliance._lstsq import CSNE_MAX_COND
+from ..compliance._stream import scaled_cho_factor
 from ._folds import correlation_length
 from ._pipeline import PipelineData
 
@@ -157,7 +158,7 @@ def partial_out(
     d = np.sqrt(np.diag(gram)[others])
     d[d == 0] = 1.0
     gs = gram[np.ix_(others, others)] / np.outer(d, d)
-    chol = scaled_cholesky(gs)
+    chol = scaled_cho_factor(gs, CSNE_MAX_COND)
     if chol is None:
         q, _ = np.linalg.qr(design[:, others] / d)
         t = target - q @ (q.T @ target)
