@@ -177,6 +177,29 @@ class _SegmentedDesign:
         return r, atr
 
 
+def scaled_cholesky(gs: np.ndarray):
+    """The Cholesky factor of a Jacobi-scaled Gram matrix `gs` (unit diagonal), when the
+    semi-normal equations may use it.
+
+    **Returns:** `(factor, cond)`, with `factor` scipy's `cho_factor` pair (upper) and `cond`
+    the scaled condition number $\\sqrt{\\lambda_{max} / \\lambda_{min}}$; or `None` when `gs`
+    is not positive definite, `cond` exceeds `CSNE_MAX_COND`, or Cholesky fails (then QR
+    decides rank and solution).
+    """
+    import scipy.linalg
+
+    ev = np.linalg.eigvalsh(gs)
+    if not ev[0] > 0:
+        return None
+    cond = float(np.sqrt(ev[-1] / ev[0]))
+    if not cond <= CSNE_MAX_COND:
+        return None
+    try:
+        return scipy.linalg.cho_factor(gs, lower=False, check_finite=False), cond
+    except np.linalg.LinAlgError:
+        return None
+
+
 def _csne(design: _SegmentedDesign, b, g: np.ndarray, atb: np.ndarray, active: np.ndarray):
     """Corrected semi-normal equations on the scaled Gram matrix, or `None` when the scaled
     condition number exceeds `CSNE_MAX_COND` (then QR decides rank and solution)."""
@@ -184,14 +207,10 @@ def _csne(design: _SegmentedDesign, b, g: np.ndarray, atb: np.ndarray, active: n
 
     d = np.sqrt(np.diag(g)[active])
     gs = g[np.ix_(active, active)] / np.outer(d, d)
-    ev = np.linalg.eigvalsh(gs)
-    if not ev[0] > 0 or np.sqrt(ev[-1] / ev[0]) > CSNE_MAX_COND:
+    chol = scaled_cholesky(gs)
+    if chol is None:
         return None
-    cond = float(np.sqrt(ev[-1] / ev[0]))
-    try:
-        factor = scipy.linalg.cho_factor(gs, lower=False)
-    except np.linalg.LinAlgError:
-        return None
+    factor, cond = chol
     coef = np.zeros(design.p)
     coef[active] = scipy.linalg.cho_solve(factor, atb[active] / d) / d
     # one step of refinement with the true residual (the "corrected" in CSNE)

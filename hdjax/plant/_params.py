@@ -242,18 +242,8 @@ def song_params(effects: Mapping | None = None, *, defaults: bool = True, **kwar
 
     **Returns:** `PlantParams`.
     """
-    return _from_preset(
-        kwargs,
-        {name: True for name in SONG_DEFAULT_EFFECTS} if defaults else {},
-        effects,
-        ratio=160.0,
-        rated_torque=400.0,
-        inertia_m=1.5e-4,
-        inertia_l=1.0,
-        torque_constant=0.25,
-        compliance=SONG_COMPLIANCE,
-        damping=20.0,
-    )
+    on = {name: True for name in SONG_DEFAULT_EFFECTS} if defaults else {}
+    return _from_preset("song", kwargs, on, effects)
 
 
 def hashimoto_params(effects: Mapping | None = None, **kwargs) -> PlantParams:
@@ -274,16 +264,7 @@ def hashimoto_params(effects: Mapping | None = None, **kwargs) -> PlantParams:
     **Returns:** `PlantParams`.
     """
     return _from_preset(
-        kwargs,
-        {"coulomb_m": {"level": 0.04, "smoothing": 0.2}},
-        effects,
-        ratio=100.0,
-        rated_torque=40.0,
-        inertia_m=9.4e-5,
-        inertia_l=0.88,
-        torque_constant=0.1,
-        compliance=np.full(5, 1.0 / 8800.0),
-        damping=0.0,
+        "hashimoto", kwargs, {"coulomb_m": {"level": 0.04, "smoothing": 0.2}}, effects
     )
 
 
@@ -291,10 +272,25 @@ CURRENT_LOOP_TIME_CONSTANT = 1.0 / (2.0 * np.pi * 1000.0)
 """The current loop of both presets [s]: 1 kHz, a typical servo driver's (an assumption)."""
 
 
-def _from_preset(overrides: dict, on: dict, effects: Mapping | None, **preset) -> PlantParams:
-    # a preset's parameters with the user's overrides (refusing unknown names), its effects
-    # `on` with the user's `effects` on top
+_PRESET_NAMES = ("song", "hashimoto")
+_PRESETS = {
+    # parameter: (Song et al. 2019, Hashimoto et al. 1993); sources in the presets' docstrings
+    "ratio": (160.0, 100.0),
+    "rated_torque": (400.0, 40.0),
+    "inertia_m": (1.5e-4, 9.4e-5),
+    "inertia_l": (1.0, 0.88),
+    "torque_constant": (0.25, 0.1),
+    "compliance": (SONG_COMPLIANCE, np.full(5, 1.0 / 8800.0)),
+    "damping": (20.0, 0.0),
+}
+
+
+def _from_preset(preset: str, overrides: dict, on: dict, effects: Mapping | None) -> PlantParams:
+    # a preset's parameters (its column of `_PRESETS`) with the user's overrides (refusing
+    # unknown names), its effects `on` with the user's `effects` on top
     allowed = [k for k in inspect.signature(make_params).parameters if k != "effects"]
     check_keys(overrides, allowed, noun="plant parameter")
-    scalars = {"current_time_constant": CURRENT_LOOP_TIME_CONSTANT, **preset, **overrides}
+    column = _PRESET_NAMES.index(preset)
+    values = {name: row[column] for name, row in _PRESETS.items()}
+    scalars = {"current_time_constant": CURRENT_LOOP_TIME_CONSTANT, **values, **overrides}
     return make_params(**scalars, effects={**on, **(effects or {})})
