@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import effects as _effects_registry
-from .._custom_types import Array, Float
+from .._custom_types import Array, ArrayInput, Float
 from .._errors import ConfigError, check_keys, did_you_mean
 from ._effects import _concrete, check_effect_name, make_effect
 
@@ -125,7 +125,9 @@ def _k1(params) -> float:
     return 1.4925e-5 if k is None else float(k[0])
 
 
-def with_effects(params: PlantParams, effects: Mapping | None = None, **more) -> PlantParams:
+def with_effects(
+    params: PlantParams, effects: Mapping | None = None, **more: object
+) -> PlantParams:
     """A copy of `params` with effects switched on, replaced or (with value `None`/`False`) off.
 
     **Arguments:**
@@ -162,15 +164,17 @@ def with_effects(params: PlantParams, effects: Mapping | None = None, **more) ->
 
 def make_params(
     *,
-    ratio,
-    rated_torque,
-    inertia_m,
-    inertia_l,
-    torque_constant,
-    current_time_constant,
-    compliance,
-    damping=0.0,
-    corner=None,
+    # the numbers as the user gives them: `PlantParams` checks each one's shape, finiteness and
+    # sign with a ConfigError that names the parameter (a type check would pre-empt it)
+    ratio: ArrayInput,
+    rated_torque: ArrayInput,
+    inertia_m: ArrayInput,
+    inertia_l: ArrayInput,
+    torque_constant: ArrayInput,
+    current_time_constant: ArrayInput,
+    compliance: ArrayInput,
+    damping: ArrayInput = 0.0,
+    corner: ArrayInput | None = None,
     effects: Mapping | None = None,
     flexspline: str = "piecewise",
     newton_iterations: int = 3,
@@ -216,7 +220,9 @@ SONG_DEFAULT_EFFECTS = (
 """Effects switched on in the Song preset (the rest stay off for 'undeclared effect' tests)."""
 
 
-def song_params(effects: Mapping | None = None, *, defaults: bool = True, **kwargs) -> PlantParams:
+def song_params(
+    effects: Mapping | None = None, *, defaults: bool = True, **kwargs: ArrayInput | str | None
+) -> PlantParams:
     r"""The Song et al. (2019) bench (Section IV.A, Figs. 7-8): ratio 160, rated torque 400 N·m.
 
     Sources of the defaults:
@@ -246,7 +252,9 @@ def song_params(effects: Mapping | None = None, *, defaults: bool = True, **kwar
     return _from_preset("song", kwargs, on, effects)
 
 
-def hashimoto_params(effects: Mapping | None = None, **kwargs) -> PlantParams:
+def hashimoto_params(
+    effects: Mapping | None = None, **kwargs: ArrayInput | str | None
+) -> PlantParams:
     r"""Hashimoto et al. (1993) one-link arm, Table I, eqs. (15)-(17).
 
     $J_L = 0.88$ kg·m², $J_M = 9.4\cdot10^{-5}$ kg·m², $K = 8800$ N·m/rad (all five compliances
