@@ -47,6 +47,7 @@ from .._recording import Recording
 from .._solution import RESULTS, Solution
 from ._model import ComplianceModel
 from ._signals import Signals
+from ._stream import scaled_cholesky
 
 CalibrationData = Recording | tuple[Signals, Float[ArrayLike, " n"]]
 """What a calibration reads: a recording with a reference torque, or `(signals, torque)`."""
@@ -180,24 +181,13 @@ class _SegmentedDesign:
 def _csne(design: _SegmentedDesign, b, g: np.ndarray, atb: np.ndarray, active: np.ndarray):
     """Corrected semi-normal equations on the scaled Gram matrix, or `None` when the scaled
     condition number exceeds `CSNE_MAX_COND` (then QR decides rank and solution)."""
-    import scipy.linalg
-
-    d = np.sqrt(np.diag(g)[active])
-    gs = g[np.ix_(active, active)] / np.outer(d, d)
-    ev = np.linalg.eigvalsh(gs)
-    if not ev[0] > 0 or np.sqrt(ev[-1] / ev[0]) > CSNE_MAX_COND:
+    csne = scaled_cholesky(g, atb, active, CSNE_MAX_COND)
+    if csne is None:
         return None
-    cond = float(np.sqrt(ev[-1] / ev[0]))
-    try:
-        factor = scipy.linalg.cho_factor(gs, lower=False)
-    except np.linalg.LinAlgError:
-        return None
-    coef = np.zeros(design.p)
-    coef[active] = scipy.linalg.cho_solve(factor, atb[active] / d) / d
+    coef, cond, solve = csne
     # one step of refinement with the true residual (the "corrected" in CSNE)
     _, atr = design.residual_and_atr(b, coef)
-    coef[active] += scipy.linalg.cho_solve(factor, atr[active] / d) / d
-    return coef, cond
+    return coef + solve(atr), cond
 
 
 def select_active(model: ComplianceModel, A: np.ndarray, torque: np.ndarray):

@@ -89,6 +89,27 @@ class NormalEquations:
         )
 
 
+def scaled_cho_factor(gs: np.ndarray, max_cond: float):
+    """The Cholesky factor of a Jacobi-scaled Gram matrix `gs` (unit diagonal), when the
+    semi-normal equations may use it.
+
+    **Returns:** `(factor, cond)`, with `factor` scipy's `cho_factor` pair (upper) and `cond`
+    the scaled condition number $\\sqrt{\\lambda_{max} / \\lambda_{min}}$; or `None` when `gs`
+    is not positive definite, `cond` exceeds `max_cond`, or Cholesky fails (then QR decides
+    rank and solution).
+    """
+    ev = np.linalg.eigvalsh(gs)
+    if not ev[0] > 0:
+        return None
+    cond = float(np.sqrt(ev[-1] / ev[0]))
+    if not cond <= max_cond:
+        return None
+    try:
+        return scipy.linalg.cho_factor(gs, lower=False, check_finite=False), cond
+    except np.linalg.LinAlgError:
+        return None
+
+
 def scaled_cholesky(g: np.ndarray, atb: np.ndarray, active: np.ndarray, max_cond: float):
     r"""Solve $G x = A^\top b$ on the active columns, scaled by $D = \sqrt{\mathrm{diag}\,G}$.
 
@@ -100,20 +121,17 @@ def scaled_cholesky(g: np.ndarray, atb: np.ndarray, active: np.ndarray, max_cond
     active = np.asarray(active, bool)
     d = np.sqrt(np.diag(g)[active])
     gs = g[np.ix_(active, active)] / np.outer(d, d)
-    ev = np.linalg.eigvalsh(gs)
-    if not ev[0] > 0 or np.sqrt(ev[-1] / ev[0]) > max_cond:
+    chol = scaled_cho_factor(gs, max_cond)
+    if chol is None:
         return None
-    try:
-        factor = scipy.linalg.cho_factor(gs, lower=False)
-    except np.linalg.LinAlgError:
-        return None
+    factor, cond = chol
 
     def solve(rhs: np.ndarray) -> np.ndarray:
         out = np.zeros(g.shape[0])
         out[active] = scipy.linalg.cho_solve(factor, np.asarray(rhs)[active] / d) / d
         return out
 
-    return solve(atb), float(np.sqrt(ev[-1] / ev[0])), solve
+    return solve(atb), cond, solve
 
 
 class StreamingQR:

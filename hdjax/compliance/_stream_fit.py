@@ -25,8 +25,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._custom_types import PathLike
 from .._errors import CalibrationError, DataError
 from .._formats import iter_recordings
+from .._io import ColumnMap
 from .._recording import Recording
 from .._solution import Solution
 from ._lstsq import (
@@ -69,7 +71,9 @@ class RecordingStream:
         return iter(self.opener())
 
     @classmethod
-    def from_recordings(cls, recordings, chunk: int) -> RecordingStream:
+    def from_recordings(
+        cls, recordings: Recording | Iterable[Recording], chunk: int
+    ) -> RecordingStream:
         """In-memory recordings cut into chunks of `chunk` samples."""
         recs = [recordings] if isinstance(recordings, Recording) else list(recordings)
         _check_chunk(chunk)
@@ -80,7 +84,14 @@ class RecordingStream:
         return cls(lambda: (cut(r) for r in recs), ", ".join(r.source for r in recs))
 
     @classmethod
-    def from_files(cls, paths, columns=None, *, chunk: int, check_units=True) -> RecordingStream:
+    def from_files(
+        cls,
+        paths: PathLike | Iterable[PathLike],
+        columns: ColumnMap | None = None,
+        *,
+        chunk: int,
+        check_units: bool = True,
+    ) -> RecordingStream:
         """Log files (any format of `hdjax.load_recording`) read `chunk` samples at a time."""
         paths = [paths] if isinstance(paths, str) or hasattr(paths, "suffix") else list(paths)
         _check_chunk(chunk)

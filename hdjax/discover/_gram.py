@@ -140,7 +140,19 @@ def block_statistics_batched(a, batches, y, blocks, *, chunk: int = CHUNK) -> Bl
         for w, v in cc_b.items():
             cc_parts.setdefault(w, []).append(v)
     widths = tuple(widths)
-    offsets = np.cumsum((0,) + widths)
+    by_width, cols = _by_width(widths)
+    cc = {w: np.concatenate(cc_parts[w], axis=1) for w in by_width}
+    ab = np.concatenate(parts, axis=2)
+    return BlockStatistics(
+        ab, cc, {w: np.asarray(idx) for w, idx in by_width.items()}, cols, p, len(widths), widths
+    )
+
+
+def _by_width(widths) -> tuple[dict[int, list[int]], dict[int, np.ndarray]]:
+    """Groups laid side by side with these column `widths`, bucketed by width.
+    **Returns:** `(by_width, cols)`: per width, the groups' positions, and their column
+    indices in the side-by-side layout, shape `(n_groups_of_width, width)`."""
+    offsets = np.cumsum([0, *widths])
     by_width: dict[int, list[int]] = {}
     for i, w in enumerate(widths):
         by_width.setdefault(w, []).append(i)
@@ -148,11 +160,7 @@ def block_statistics_batched(a, batches, y, blocks, *, chunk: int = CHUNK) -> Bl
         w: np.array([np.arange(offsets[i], offsets[i] + w) for i in idx])
         for w, idx in by_width.items()
     }
-    cc = {w: np.concatenate(cc_parts[w], axis=1) for w in by_width}
-    ab = np.concatenate(parts, axis=2)
-    return BlockStatistics(
-        ab, cc, {w: np.asarray(idx) for w, idx in by_width.items()}, cols, p, len(widths), widths
-    )
+    return by_width, cols
 
 
 def _batch_statistics(a, yt, groups, bounds, chunks, project):
@@ -167,13 +175,7 @@ def _batch_statistics(a, yt, groups, bounds, chunks, project):
     widths = [int(g.shape[1]) for g in groups]
     offsets = np.cumsum([0] + widths)
     c_total = int(offsets[-1])
-    by_width: dict[int, list[int]] = {}
-    for i, w in enumerate(widths):
-        by_width.setdefault(w, []).append(i)
-    cols = {
-        w: np.array([np.arange(offsets[i], offsets[i] + w) for i in idx])
-        for w, idx in by_width.items()
-    }
+    by_width, cols = _by_width(widths)
 
     def stacked(lo, hi):
         m = np.empty((hi - lo, c_total))

@@ -29,6 +29,7 @@ from .._recording import Recording
 from ..compliance import ComplianceModel, Signals, calibrate_lstsq, signals_from_recording
 from ..compliance._inversion import _estimate
 from ..compliance._lstsq import CSNE_MAX_COND, _design
+from ..compliance._stream import scaled_cho_factor
 from ..effects import SEGMENT_START, TORQUE_PATH
 from ._folds import segment_starts
 
@@ -237,20 +238,15 @@ class FoldSolver:
         g = self.g[np.ix_(keep, keep)] - at.T @ at
         aty = self.aty[keep] - at.T @ y[te]
         d = np.sqrt(np.maximum(np.diag(g), 0.0))
-        fast = None
+        chol = None
         if d.size and np.all(d > 0):
-            gs = g / np.outer(d, d)
-            ev = np.linalg.eigvalsh(gs)
-            if ev[0] > 0 and np.sqrt(ev[-1] / ev[0]) <= CSNE_MAX_COND:
-                try:
-                    fast = scipy.linalg.cho_factor(gs, lower=False, check_finite=False)
-                except np.linalg.LinAlgError:
-                    fast = None
-        if fast is None:
+            chol = scaled_cho_factor(g / np.outer(d, d), CSNE_MAX_COND)
+        if chol is None:
             train_rows = np.ones(a.shape[0], bool)
             train_rows[te] = False
             coef[act] = _fold_solve(a[train_rows][:, act], y[train_rows])
             return coef
+        fast = chol[0]
         coef[idx] = scipy.linalg.cho_solve(fast, aty / d, check_finite=False) / d
         # one refinement step with the true residual over the training rows
         r = y - a @ coef

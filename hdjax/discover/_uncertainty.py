@@ -32,6 +32,7 @@ import numpy as np
 
 from ..compliance import ComplianceModel
 from ..compliance._lstsq import CSNE_MAX_COND
+from ..compliance._stream import scaled_cho_factor
 from ._folds import correlation_length
 from ._pipeline import PipelineData
 
@@ -157,17 +158,12 @@ def partial_out(
     d = np.sqrt(np.diag(gram)[others])
     d[d == 0] = 1.0
     gs = gram[np.ix_(others, others)] / np.outer(d, d)
-    factor = None
-    ev = np.linalg.eigvalsh(gs)
-    if ev[0] > 0 and np.sqrt(ev[-1] / ev[0]) <= CSNE_MAX_COND:
-        try:
-            factor = scipy.linalg.cho_factor(gs, lower=False, check_finite=False)
-        except np.linalg.LinAlgError:
-            factor = None
-    if factor is None:
+    chol = scaled_cho_factor(gs, CSNE_MAX_COND)
+    if chol is None:
         q, _ = np.linalg.qr(design[:, others] / d)
         t = target - q @ (q.T @ target)
         return t[:, :-1], t[:, -1]
+    factor = chol[0]
     # coefficients on all columns, zero off `others`, so no copy of those columns is made
     w = np.zeros((p, target.shape[1]))
     w[others] = (

@@ -20,7 +20,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, Float, Pointwise, PointwiseOut
-from ._base import AbstractFamily, AbstractMemorylessTerm, AbstractPlantEffect, Candidate
+from ._base import (
+    AbstractFamily,
+    AbstractMemorylessTerm,
+    AbstractPlantEffect,
+    Candidate,
+    CandidateContext,
+)
 from ._fields import bound, hyper, labels
 
 
@@ -78,7 +84,7 @@ class BacklashFamily(AbstractFamily):
     discover_families: ClassVar[tuple] = ("backlash:torque",)
     options: ClassVar[dict] = {"backlash_fractions": (0.005, 0.01, 0.02, 0.05)}
 
-    def candidates(self, ctx):
+    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
         if not ctx.wants("backlash:torque"):
             return []
         fractions = ctx.option(self, "backlash_fractions")

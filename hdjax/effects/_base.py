@@ -23,9 +23,9 @@ import abc
 import dataclasses
 import functools
 import typing
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from types import ModuleType
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -442,6 +442,20 @@ class Candidate:
         return cls(term.key, term.key, term, origin)
 
 
+@typing.runtime_checkable
+class OptionsLike(typing.Protocol):
+    """The library options a [`CandidateContext`][] carries: a dataclass instance with one
+    field per family option ([`hdjax.discover.LibraryOptions`][], built by the discover layer,
+    which this one does not import)."""
+
+    __dataclass_fields__: ClassVar[dict]
+
+
+OptionValue = Sequence[float] | float
+"""A family option's value: a grid of numbers, a (min, max) pair, or one number (a count, a
+threshold)."""
+
+
 @dataclasses.dataclass
 class CandidateContext:
     """What a family's candidate generator may read (built by the residual loop each step).
@@ -469,10 +483,10 @@ class CandidateContext:
     existing_terms: tuple
     extra_columns: tuple[str, ...]
     families: frozenset
-    options: Any
+    options: OptionsLike
     spectrum_orders: Callable | None = None
 
-    def option(self, family: AbstractFamily, name: str):
+    def option(self, family: AbstractFamily, name: str) -> OptionValue:
         """A library option of `family`, or the family's default when the options lack it."""
         return getattr(self.options, name, family.options[name])
 

@@ -23,7 +23,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, SamplesLike
-from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm
+from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm, Candidate, CandidateContext
 from ._fields import bound, hyper, labels
 from ._friction import friction_effects, velocity_candidates
 
@@ -70,5 +70,5 @@ class CoulombFamily(AbstractFamily):
     discover_families: ClassVar[tuple] = ("coulomb:omega_m", "coulomb:omega_l")
     options: ClassVar[dict] = {"smoothing_fractions": (0.003, 0.01, 0.03, 0.1, 0.3)}
 
-    def candidates(self, ctx):
+    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
         return velocity_candidates(ctx, "coulomb", Coulomb, ctx.option(self, "smoothing_fractions"))

@@ -19,7 +19,7 @@ import numpy as np
 
 from .._custom_types import Array, Float, SamplesLike
 from .._features import Signals
-from ._base import AbstractFamily, AbstractTorqueFreeTerm, Candidate
+from ._base import AbstractFamily, AbstractTorqueFreeTerm, Candidate, CandidateContext
 from ._fields import hyper, labels, rounded
 
 
@@ -56,7 +56,7 @@ class DampingFamily(AbstractFamily):
     plant_effects: ClassVar[tuple] = ()
     discover_families: ClassVar[tuple] = ("damping:twist_rate",)
 
-    def candidates(self, ctx):
+    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
         if not ctx.wants("damping:twist_rate"):
             return []
         rate = np.asarray(ctx.sig.omega_l) - np.asarray(ctx.sig.omega_m) / ctx.ratio

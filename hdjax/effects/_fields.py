@@ -12,12 +12,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._custom_types import Array, ArrayInput, Float
 from .._errors import ConfigError
 
 
@@ -42,7 +43,7 @@ def check_positive(owner: str, field: str, value) -> None:
 # ---------------------------------------------------------------------------------------------
 
 
-def hyper(default=dataclasses.MISSING, *, positive: bool = False):
+def hyper(default: Hashable = dataclasses.MISSING, *, positive: bool = False) -> dataclasses.Field:
     """A term's hyperparameter: a static field (hashable, never traced), checked to be finite
     and positive at construction when `positive` (see [`AbstractTerm`][])."""
     return eqx.field(default=default, static=True, metadata={"positive": positive})
@@ -82,7 +83,7 @@ BOUNDS = ("finite", "nonneg", "positive")
 """What [`bound`][] can require of a plant-effect parameter (every one must be finite)."""
 
 
-def bound(rule: str, *, inverse: bool = False):
+def bound(rule: str, *, inverse: bool = False) -> dataclasses.Field:
     """A plant-effect parameter field that [`hdjax.effects.AbstractPlantEffect.from_params`][]
     checks to be `"nonneg"` or `"positive"` (a field declared without it need only be finite).
     With `inverse`, the parameter is a scale the effect divides by: its inverse is one of the
@@ -92,7 +93,7 @@ def bound(rule: str, *, inverse: bool = False):
     return eqx.field(metadata={"bound": rule, "inverse": inverse})
 
 
-def f64(x):
+def f64(x: ArrayInput) -> Float[Array, " ..."]:
     """`x` as a float64 JAX array."""
     return jnp.asarray(x, jnp.float64)
 
@@ -105,8 +106,20 @@ def concrete(x):
         return None
 
 
-def require(name: str, field: str, value, *, positive=False, nonneg=False, shape=None):
-    """Validate one plant-effect parameter in plain Python (skipped for tracers)."""
+def require(
+    name: str,
+    field: str,
+    value: ArrayInput,
+    *,
+    positive: bool = False,
+    nonneg: bool = False,
+    shape: tuple[int, ...] | None = None,
+) -> None:
+    """Validate one plant-effect parameter in plain Python (skipped for tracers).
+
+    `value` is the parameter as the user gives it (a number, a list, an array): this function
+    checks its shape, finiteness and sign itself and raises a `ConfigError` that says what is
+    wrong, so its annotation stays the loose `ArrayInput`."""
     arr = concrete(value)
     if arr is None:
         return

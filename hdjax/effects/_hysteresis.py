@@ -44,6 +44,7 @@ from ._base import (
     AbstractPathTerm,
     AbstractTorqueFreeTerm,
     Candidate,
+    CandidateContext,
     PlantEffect,
 )
 from ._fields import bound, concrete, hyper, labels
@@ -82,7 +83,9 @@ def _dahl_scan(du, reset):
     return jax.lax.scan(_step, jnp.zeros((), du.dtype), (du, reset))[1]
 
 
-def dahl_state_numpy(torque, torque_scale: float, reset=None) -> np.ndarray:
+def dahl_state_numpy(
+    torque: SamplesLike, torque_scale: float, reset: Shaped[ArrayLike, " n"] | None = None
+) -> Float[np.ndarray, " n"]:
     """[`dahl_state`][] in NumPy, vectorised (no loop over samples).
 
     With $d_k = \\Delta T_k / T_h$ and $|z_{k-1}| \\le 1$, one step of the clipped recursion is
@@ -353,7 +356,7 @@ class HysteresisFamily(AbstractFamily):
     discover_families: ClassVar[tuple] = ("hysteresis:torque",)
     options: ClassVar[dict] = {"dahl_fractions": (0.01, 0.025, 0.05, 0.1, 0.2)}
 
-    def candidates(self, ctx):
+    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
         if not ctx.wants("hysteresis:torque"):
             return []
         # the state follows the measured deformation (stable, needs no estimate)

@@ -29,6 +29,7 @@ from ._base import (
     AbstractFamily,
     AbstractPlantEffect,
     Candidate,
+    CandidateContext,
     both_sides,
 )
 from ._fields import bound, fmt, hyper
@@ -172,7 +173,7 @@ class KinematicFamily(AbstractFamily):
         "n_peaks": 3,
     }
 
-    def candidates(self, ctx):
+    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
         existing = {"theta_m": [], "theta_l": []}
         for term in ctx.existing_terms:
             if isinstance(term, Harmonics):

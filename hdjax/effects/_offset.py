@@ -17,7 +17,7 @@ import numpy as np
 
 from .._custom_types import Array, Float, SamplesLike
 from .._features import Signals
-from ._base import AbstractColumnListTerm, AbstractFamily
+from ._base import AbstractColumnListTerm, AbstractFamily, Candidate, CandidateContext
 
 
 class Constant(AbstractColumnListTerm):
@@ -45,5 +45,5 @@ class OffsetFamily(AbstractFamily):
     name: ClassVar[str] = "offset"
     terms: ClassVar[tuple] = (Constant,)
 
-    def candidates(self, ctx):
+    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
         return []

@@ -47,6 +47,7 @@ from ._base import (
     AbstractLinearTorqueTerm,
     AbstractPlantEffect,
     Candidate,
+    CandidateContext,
     both_sides,
 )
 from ._fields import bound, concrete, fmt, hyper
@@ -168,7 +169,7 @@ class RippleFamily(AbstractFamily):
         "ripple_min_periods": 3.0,
     }
 
-    def candidates(self, ctx):
+    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
         existing = {"theta_m": [], "theta_l": []}
         for term in ctx.existing_terms:
             if isinstance(term, Ripple):

@@ -15,7 +15,13 @@ from typing import ClassVar
 import numpy as np
 
 from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut
-from ._base import AbstractFamily, AbstractMemorylessTerm, AbstractPlantEffect, Candidate
+from ._base import (
+    AbstractFamily,
+    AbstractMemorylessTerm,
+    AbstractPlantEffect,
+    Candidate,
+    CandidateContext,
+)
 from ._fields import bound, hyper, labels
 
 
@@ -60,7 +66,7 @@ class StiffeningFamily(AbstractFamily):
     plant_effects: ClassVar[tuple] = (CubicSpring.entry("stiffening", "spring", _defaults),)
     discover_families: ClassVar[tuple] = ("stiffness:torque",)
 
-    def candidates(self, ctx):
+    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
         if not ctx.wants("stiffness:torque"):
             return []
         return [Candidate.of(Stiffening(torque_scale=float(ctx.rated_torque)))]

@@ -30,7 +30,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, SamplesLike
-from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm
+from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm, Candidate, CandidateContext
 from ._coulomb import Coulomb
 from ._fields import bound, hyper, labels
 from ._friction import friction_effects, velocity_candidates
@@ -87,7 +87,7 @@ class StribeckFamily(AbstractFamily):
     discover_families: ClassVar[tuple] = ("stribeck:omega_m", "stribeck:omega_l")
     options: ClassVar[dict] = {"stribeck_fractions": (0.1, 0.2, 0.35, 0.6, 1.0, 1.7)}
 
-    def candidates(self, ctx):
+    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
         # each side's Stribeck excess shares the smooth sign of that side's Coulomb term
         omega_s = {}
         for t in ctx.existing_terms:

@@ -28,6 +28,7 @@ from ._base import (
     AbstractPlantEffect,
     AbstractSignalTerm,
     Candidate,
+    CandidateContext,
 )
 from ._fields import bound, hyper, labels, rounded
 
@@ -125,7 +126,7 @@ class ThermalFamily(AbstractFamily):
     discover_families: ClassVar[tuple] = ("column",)
     vocabulary: ClassVar[str] = "column:NAME, column:NAME*torque"
 
-    def candidates(self, ctx):
+    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
         if "column" not in ctx.families:
             return []
         out = []

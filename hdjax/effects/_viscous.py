@@ -17,7 +17,7 @@ from typing import ClassVar
 import equinox as eqx
 
 from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, SamplesLike
-from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm
+from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm, Candidate, CandidateContext
 from ._fields import bound, hyper, labels
 from ._friction import friction_effects, velocity_candidates
 
@@ -60,5 +60,5 @@ class ViscousFamily(AbstractFamily):
     )
     discover_families: ClassVar[tuple] = ("viscous:omega_m", "viscous:omega_l")
 
-    def candidates(self, ctx):
+    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
         return velocity_candidates(ctx, "viscous", Viscous, (1.0,))

@@ -19,7 +19,14 @@ import numpy as np
 from .._custom_types import Array, Float, NumpyDesign, Pointwise, PointwiseOut, SamplesLike
 from .._errors import ConfigError
 from .._features import Signals
-from ._base import AbstractColumnListTerm, AbstractFamily, AbstractPlantEffect, PlantEffect
+from ._base import (
+    AbstractColumnListTerm,
+    AbstractFamily,
+    AbstractPlantEffect,
+    Candidate,
+    CandidateContext,
+    PlantEffect,
+)
 from ._fields import concrete, hyper
 
 
@@ -106,5 +113,5 @@ class WaveGeneratorFamily(AbstractFamily):
         ),
     )
 
-    def candidates(self, ctx):
+    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
         return []

@@ -23,8 +23,9 @@ and grows with the recorded torque (see `hdjax/plant/_dynamics.py`).
 from __future__ import annotations
 
 from .. import effects
+from .._custom_types import ArrayInput
 from .._errors import ConfigError, did_you_mean
-from ..effects._base import check_slot
+from ..effects._base import AbstractPlantEffect, check_slot
 from ..effects._fields import concrete as _concrete
 
 __all__ = ["EFFECT_NAMES", "check_effect_name", "make_effect", "_concrete"]
@@ -39,7 +40,15 @@ def check_effect_name(name: str) -> None:
     effects.plant_effect(name)
 
 
-def make_effect(name: str, *, rated_torque: float = 400.0, k1: float = 1.4925e-5, **kwargs):
+def make_effect(
+    name: str,
+    *,
+    rated_torque: float = 400.0,
+    k1: float = 1.4925e-5,
+    # the parameters as the user gives them (numbers, lists, a model name), checked by the
+    # effect's builder with a ConfigError that names the parameter
+    **kwargs: ArrayInput | str,
+) -> AbstractPlantEffect:
     """Build one effect module by name, filling unspecified parameters with defaults.
 
     **Arguments:**

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import effects as _effects_registry
-from .._custom_types import Array, Float
+from .._custom_types import Array, ArrayInput, Float
 from .._errors import ConfigError, check_keys, did_you_mean
 from ._effects import _concrete, check_effect_name, make_effect
 
@@ -125,7 +125,9 @@ def _k1(params) -> float:
     return 1.4925e-5 if k is None else float(k[0])
 
 
-def with_effects(params: PlantParams, effects: Mapping | None = None, **more) -> PlantParams:
+def with_effects(
+    params: PlantParams, effects: Mapping | None = None, **more: object
+) -> PlantParams:
     """A copy of `params` with effects switched on, replaced or (with value `None`/`False`) off.
 
     **Arguments:**
@@ -162,15 +164,17 @@ def with_effects(params: PlantParams, effects: Mapping | None = None, **more) ->
 
 def make_params(
     *,
-    ratio,
-    rated_torque,
-    inertia_m,
-    inertia_l,
-    torque_constant,
-    current_time_constant,
-    compliance,
-    damping=0.0,
-    corner=None,
+    # the numbers as the user gives them: `PlantParams` checks each one's shape, finiteness and
+    # sign with a ConfigError that names the parameter (a type check would pre-empt it)
+    ratio: ArrayInput,
+    rated_torque: ArrayInput,
+    inertia_m: ArrayInput,
+    inertia_l: ArrayInput,
+    torque_constant: ArrayInput,
+    current_time_constant: ArrayInput,
+    compliance: ArrayInput,
+    damping: ArrayInput = 0.0,
+    corner: ArrayInput | None = None,
     effects: Mapping | None = None,
     flexspline: str = "piecewise",
     newton_iterations: int = 3,
@@ -216,7 +220,9 @@ SONG_DEFAULT_EFFECTS = (
 """Effects switched on in the Song preset (the rest stay off for 'undeclared effect' tests)."""
 
 
-def song_params(effects: Mapping | None = None, *, defaults: bool = True, **kwargs) -> PlantParams:
+def song_params(
+    effects: Mapping | None = None, *, defaults: bool = True, **kwargs: ArrayInput | str | None
+) -> PlantParams:
     r"""The Song et al. (2019) bench (Section IV.A, Figs. 7-8): ratio 160, rated torque 400 N·m.
 
     Sources of the defaults:
@@ -242,21 +248,13 @@ def song_params(effects: Mapping | None = None, *, defaults: bool = True, **kwar
 
     **Returns:** `PlantParams`.
     """
-    return _from_preset(
-        kwargs,
-        {name: True for name in SONG_DEFAULT_EFFECTS} if defaults else {},
-        effects,
-        ratio=160.0,
-        rated_torque=400.0,
-        inertia_m=1.5e-4,
-        inertia_l=1.0,
-        torque_constant=0.25,
-        compliance=SONG_COMPLIANCE,
-        damping=20.0,
-    )
+    on = {name: True for name in SONG_DEFAULT_EFFECTS} if defaults else {}
+    return _from_preset("song", kwargs, on, effects)
 
 
-def hashimoto_params(effects: Mapping | None = None, **kwargs) -> PlantParams:
+def hashimoto_params(
+    effects: Mapping | None = None, **kwargs: ArrayInput | str | None
+) -> PlantParams:
     r"""Hashimoto et al. (1993) one-link arm, Table I, eqs. (15)-(17).
 
     $J_L = 0.88$ kg·m², $J_M = 9.4\cdot10^{-5}$ kg·m², $K = 8800$ N·m/rad (all five compliances
@@ -274,16 +272,7 @@ def hashimoto_params(effects: Mapping | None = None, **kwargs) -> PlantParams:
     **Returns:** `PlantParams`.
     """
     return _from_preset(
-        kwargs,
-        {"coulomb_m": {"level": 0.04, "smoothing": 0.2}},
-        effects,
-        ratio=100.0,
-        rated_torque=40.0,
-        inertia_m=9.4e-5,
-        inertia_l=0.88,
-        torque_constant=0.1,
-        compliance=np.full(5, 1.0 / 8800.0),
-        damping=0.0,
+        "hashimoto", kwargs, {"coulomb_m": {"level": 0.04, "smoothing": 0.2}}, effects
     )
 
 
@@ -291,10 +280,25 @@ CURRENT_LOOP_TIME_CONSTANT = 1.0 / (2.0 * np.pi * 1000.0)
 """The current loop of both presets [s]: 1 kHz, a typical servo driver's (an assumption)."""
 
 
-def _from_preset(overrides: dict, on: dict, effects: Mapping | None, **preset) -> PlantParams:
-    # a preset's parameters with the user's overrides (refusing unknown names), its effects
-    # `on` with the user's `effects` on top
+_PRESET_NAMES = ("song", "hashimoto")
+_PRESETS = {
+    # parameter: (Song et al. 2019, Hashimoto et al. 1993); sources in the presets' docstrings
+    "ratio": (160.0, 100.0),
+    "rated_torque": (400.0, 40.0),
+    "inertia_m": (1.5e-4, 9.4e-5),
+    "inertia_l": (1.0, 0.88),
+    "torque_constant": (0.25, 0.1),
+    "compliance": (SONG_COMPLIANCE, np.full(5, 1.0 / 8800.0)),
+    "damping": (20.0, 0.0),
+}
+
+
+def _from_preset(preset: str, overrides: dict, on: dict, effects: Mapping | None) -> PlantParams:
+    # a preset's parameters (its column of `_PRESETS`) with the user's overrides (refusing
+    # unknown names), its effects `on` with the user's `effects` on top
     allowed = [k for k in inspect.signature(make_params).parameters if k != "effects"]
     check_keys(overrides, allowed, noun="plant parameter")
-    scalars = {"current_time_constant": CURRENT_LOOP_TIME_CONSTANT, **preset, **overrides}
+    column = _PRESET_NAMES.index(preset)
+    values = {name: row[column] for name, row in _PRESETS.items()}
+    scalars = {"current_time_constant": CURRENT_LOOP_TIME_CONSTANT, **values, **overrides}
     return make_params(**scalars, effects={**on, **(effects or {})})

@@ -18,11 +18,13 @@ All loads scale with `params.rated_torque`, so the same scenarios run on the Has
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._custom_types import PRNGKeyArray
 from .._errors import ConfigError, did_you_mean
 from .._lazy import scipy_signal
 from .._recording import Recording
@@ -56,7 +58,9 @@ def _hold(n, theta=0.0):
     return z + theta, z, z.copy()
 
 
-def scenario_drive(name: str, params: PlantParams, *, duration: float, dt: float, key) -> Drive:
+def scenario_drive(
+    name: str, params: PlantParams, *, duration: float, dt: float, key: PRNGKeyArray
+) -> Drive:
     """The bench's commanded trajectory and loads for one named scenario (see module docs).
 
     **Arguments:**
@@ -180,13 +184,13 @@ def _prepare(names, params, effects, duration, dt) -> PlantParams:
 def simulate_scenario(
     name: str,
     *,
-    key,
+    key: PRNGKeyArray,
     duration: float = 60.0,
-    effects=None,
+    effects: Mapping | None = None,
     params: PlantParams | None = None,
     dt: float = 5e-4,
     output_period: float = 5e-4,
-    sensors=None,
+    sensors: SensorConfig | None = None,
     truth: bool = False,
     memory_limit: int = DEFAULT_MEMORY_LIMIT,
 ) -> Recording:
@@ -224,15 +228,15 @@ def simulate_scenario(
 
 
 def simulate_scenarios(
-    names=SCENARIOS,
+    names: Sequence[str] = SCENARIOS,
     *,
-    key,
+    key: PRNGKeyArray,
     duration: float = 60.0,
-    effects=None,
+    effects: Mapping | None = None,
     params: PlantParams | None = None,
     dt: float = 5e-4,
     output_period: float = 5e-4,
-    sensors=None,
+    sensors: SensorConfig | None = None,
     truth: bool = False,
     memory_limit: int = DEFAULT_MEMORY_LIMIT,
 ) -> dict[str, Recording]:
