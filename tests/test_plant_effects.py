@@ -34,6 +34,8 @@ def test_unknown_effect_parameter():
         ({"wg_compliance": {"coefficients": [-0.01, 0.0]}}, "w_1 must be positive"),
         ({"stiffening": {"cubic": -1.0}}, "'cubic' must be non-negative"),
         ({"temperature": {"time_constant": -3.0}}, "'time_constant' must be positive"),
+        ({"coulomb_m": {"level": "abc"}}, "'level' must be a number or a list of numbers"),
+        ({"ripple_m": {"amplitudes": ["x"]}}, "'amplitudes' must be a number or a list"),
     ],
 )
 def test_wrong_sign_parameters(effects, match):

@@ -98,12 +98,20 @@ def f64(x: ArrayInput) -> Float[Array, " ..."]:
     return jnp.asarray(x, jnp.float64)
 
 
-def concrete(x):
-    """A NumPy copy of `x` when it is concrete, else None (inside a trace)."""
+def concrete(x, name: str = "", field: str = ""):
+    """A NumPy copy of `x` when it is concrete, else None (inside a trace).
+
+    A value that is not a number (a word, a table) is a `ConfigError` that names the parameter,
+    never an error from inside JAX later on."""
     try:
         return np.asarray(x, dtype=np.float64)
-    except Exception:  # a tracer
-        return None
+    except Exception:
+        if not isinstance(x, (str, bytes, dict, list, tuple)):
+            return None  # a tracer or another abstract value
+        raise ConfigError(
+            f"effect {name!r}: parameter {field!r} must be a number or a list of numbers, "
+            f"got {x!r}"
+        ) from None
 
 
 def require(
@@ -120,7 +128,7 @@ def require(
     `value` is the parameter as the user gives it (a number, a list, an array): this function
     checks its shape, finiteness and sign itself and raises a `ConfigError` that says what is
     wrong, so its annotation stays the loose `ArrayInput`."""
-    arr = concrete(value)
+    arr = concrete(value, name, field)
     if arr is None:
         return
     if shape is not None and arr.shape != shape:
@@ -137,7 +145,7 @@ def require(
 
 def vector(name: str, field: str, value):
     """A 1-D float64 parameter, refusing other ranks."""
-    arr = concrete(value)
+    arr = concrete(value, name, field)
     if arr is not None and arr.ndim != 1:
         raise ConfigError(
             f"effect {name!r}: parameter {field!r} must be a 1-D list, got shape {arr.shape}"
