@@ -109,8 +109,7 @@ def concrete(x, name: str = "", field: str = ""):
         if not isinstance(x, (str, bytes, dict, list, tuple)):
             return None  # a tracer or another abstract value
         raise ConfigError(
-            f"effect {name!r}: parameter {field!r} must be a number or a list of numbers, "
-            f"got {x!r}"
+            f"effect {name!r}: parameter {field!r} must be a number or a list of numbers, got {x!r}"
         ) from None
 
 
