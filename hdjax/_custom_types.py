@@ -27,6 +27,9 @@ the arguments so annotated in one call share their shape with a [`PointwiseOut`]
 PointwiseOut = Float[Array, "*shape"]
 """The value of a pointwise law, shaped like its [`Pointwise`][] input."""
 
+RealLike = Real[ArrayLike, " ..."]
+"""Real numbers of any shape, a Python number included (a signal a function converts itself)."""
+
 Scalar = Real[ArrayLike, ""]
 """A real number: a Python int or float, or a 0-d array (a module field that JAX may trace, as
 under `vmap` or `grad`)."""

@@ -19,7 +19,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import ArrayLike, Float, Real
+from .._custom_types import ArrayLike, Float, RealLike
 from .._errors import ConfigError, DataError, ModelMismatchError
 from .._features import signals
 from .._joint import Joint
@@ -128,7 +128,7 @@ def build_features(
 
 
 def check_training_data(
-    x: Real[ArrayLike, " ..."], y: Real[ArrayLike, " ..."], source: str = "training data"
+    x: RealLike, y: RealLike, source: str = "training data"
 ) -> tuple[Float[np.ndarray, "m n_features"], Float[np.ndarray, " m"]]:
     """Validate a training set in plain Python: shapes, finiteness, a target that varies."""
     x = np.asarray(x, np.float64)

@@ -19,7 +19,7 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, ArrayLike, Float, Real, Scalar
+from .._custom_types import Array, Float, RealLike, Scalar
 from .._errors import ConfigError
 from ._gauges import (
     PSI0_PAPER,
@@ -42,24 +42,14 @@ class AbstractTorqueSensor(eqx.Module):
     """
 
     @abc.abstractmethod
-    def read(
-        self,
-        torque: Real[ArrayLike, " ..."],
-        q_m: Real[ArrayLike, " ..."],
-        q_l: Real[ArrayLike, " ..."],
-    ) -> Float[Array, " ..."]:
+    def read(self, torque: RealLike, q_m: RealLike, q_l: RealLike) -> Float[Array, " ..."]:
         raise NotImplementedError
 
 
 class IdealTorqueSensor(AbstractTorqueSensor):
     """The true joint torque, unaltered (the reference case)."""
 
-    def read(
-        self,
-        torque: Real[ArrayLike, " ..."],
-        q_m: Real[ArrayLike, " ..."],
-        q_l: Real[ArrayLike, " ..."],
-    ) -> Float[Array, " ..."]:
+    def read(self, torque: RealLike, q_m: RealLike, q_l: RealLike) -> Float[Array, " ..."]:
         return jnp.asarray(torque, jnp.float64)
 
 
@@ -125,9 +115,7 @@ class StrainGaugeSensor(AbstractTorqueSensor):
             self.amplifier_gain * self.gauge_factor * self.supply * strain_per_torque(self.geometry)
         )
 
-    def beta(
-        self, q_m: Real[ArrayLike, " ..."], q_l: Real[ArrayLike, " ..."]
-    ) -> Float[Array, " ..."]:
+    def beta(self, q_m: RealLike, q_l: RealLike) -> Float[Array, " ..."]:
         r"""Angle $\beta$ of gauges R1/R2 from the wave generator's major axis [rad]."""
         q_m = jnp.asarray(q_m, jnp.float64)
         if self.mounting == "output":
@@ -142,9 +130,9 @@ class StrainGaugeSensor(AbstractTorqueSensor):
     # -- reading ------------------------------------------------------------------------------
     def strains(
         self,
-        torque: Real[ArrayLike, " ..."],
-        q_m: Real[ArrayLike, " ..."],
-        q_l: Real[ArrayLike, " ..."],
+        torque: RealLike,
+        q_m: RealLike,
+        q_l: RealLike,
     ) -> GaugeStrains:
         """The four gauge strains under joint torque `torque` at motor/output angles q_m, q_l."""
         eps_t = jnp.asarray(torque, jnp.float64) * strain_per_torque(self.geometry)
@@ -152,9 +140,9 @@ class StrainGaugeSensor(AbstractTorqueSensor):
 
     def voltage(
         self,
-        torque: Real[ArrayLike, " ..."],
-        q_m: Real[ArrayLike, " ..."],
-        q_l: Real[ArrayLike, " ..."],
+        torque: RealLike,
+        q_m: RealLike,
+        q_l: RealLike,
     ) -> Float[Array, " ..."]:
         """Amplified bridge voltage [V], quantised by the ADC if `adc_bits` is set."""
         v = self.amplifier_gain * bridge_output(
@@ -165,12 +153,7 @@ class StrainGaugeSensor(AbstractTorqueSensor):
             v = jnp.clip(jnp.round(v / lsb) * lsb, -self.adc_range, self.adc_range)
         return v
 
-    def read(
-        self,
-        torque: Real[ArrayLike, " ..."],
-        q_m: Real[ArrayLike, " ..."],
-        q_l: Real[ArrayLike, " ..."],
-    ) -> Float[Array, " ..."]:
+    def read(self, torque: RealLike, q_m: RealLike, q_l: RealLike) -> Float[Array, " ..."]:
         r"""The sensor's torque reading [N·m]: voltage over the nominal sensitivity.
 
         Equals `torque` plus the ripple $\Psi\sin(2\beta+\gamma)/(4\epsilon_t/T)$ (and the ADC

@@ -27,7 +27,7 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, ArrayLike, Float, Real, Scalar
+from .._custom_types import Array, Float, RealLike, Scalar
 from .._errors import ConfigError
 
 # Table I and Section IV of the paper.
@@ -153,11 +153,11 @@ def hashimoto_controller(
 
 def control_law(
     controller: TorqueController,
-    t_d: Real[ArrayLike, " ..."],
-    dt_d: Real[ArrayLike, " ..."],
-    ddt_d: Real[ArrayLike, " ..."],
-    t_meas: Real[ArrayLike, " ..."],
-    t_meas_prev: Real[ArrayLike, " ..."],
+    t_d: RealLike,
+    dt_d: RealLike,
+    ddt_d: RealLike,
+    t_meas: RealLike,
+    t_meas_prev: RealLike,
 ) -> Float[Array, ""]:
     r"""Motor torque $\tau_M$ commanded by eq. (19) at one sampling instant.
 

@@ -15,13 +15,13 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, ArrayLike, Float, Real, Scalar
+from .._custom_types import Array, Float, RealLike, Scalar
 from .._errors import ConfigError
 from ._bridge_sensor import AbstractTorqueSensor
 from ._control import TABLE_I
 
 
-def quantise(angle: Real[ArrayLike, " ..."], bits: int | None) -> Float[Array, " ..."]:
+def quantise(angle: RealLike, bits: int | None) -> Float[Array, " ..."]:
     """Round an angle [rad] to the nearest count of a `bits`-bit-per-revolution encoder."""
     angle = jnp.asarray(angle, jnp.float64)
     if bits is None:
@@ -63,11 +63,6 @@ class DeformationSensor(AbstractTorqueSensor):
             return 0.0
         return self.stiffness * 2 * math.pi / 2**self.load_bits
 
-    def read(
-        self,
-        torque: Real[ArrayLike, " ..."],
-        q_m: Real[ArrayLike, " ..."],
-        q_l: Real[ArrayLike, " ..."],
-    ) -> Float[Array, " ..."]:
+    def read(self, torque: RealLike, q_m: RealLike, q_l: RealLike) -> Float[Array, " ..."]:
         twist = quantise(q_m, self.motor_bits) / self.ratio - quantise(q_l, self.load_bits)
         return self.stiffness * twist

@@ -21,7 +21,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._custom_types import Array, ArrayLike, Float, Real, Scalar
+from .._custom_types import Array, Float, RealLike, Scalar
 from .._errors import ConfigError
 
 # Paper values (Section III-A/B).
@@ -118,9 +118,7 @@ def strain_per_torque_appendix(geometry: FlexsplineGeometry) -> Float[Array, ""]
     return alpha_d_per_torque / 2.0  # eq. (A6)
 
 
-def torsional_strain(
-    geometry: FlexsplineGeometry, torque: Real[ArrayLike, " ..."]
-) -> Float[Array, " ..."]:
+def torsional_strain(geometry: FlexsplineGeometry, torque: RealLike) -> Float[Array, " ..."]:
     r"""Torsional gauge strain $\epsilon_t$ under a torque $T$ [N·m], eq. (7)."""
     return jnp.asarray(torque, jnp.float64) * strain_per_torque(geometry)
 
@@ -160,11 +158,11 @@ class GaugeStrains(NamedTuple):
 
 
 def gauge_strains(
-    eps_t: Real[ArrayLike, " ..."],
-    beta: Real[ArrayLike, " ..."],
+    eps_t: RealLike,
+    beta: RealLike,
     psi0: Scalar = PSI0_PAPER,
-    dalpha: Real[ArrayLike, " ..."] = 0.0,
-    common: Real[ArrayLike, " ..."] = 0.0,
+    dalpha: RealLike = 0.0,
+    common: RealLike = 0.0,
 ) -> GaugeStrains:
     r"""Strains on the four gauges, eqs. (1)-(4) and (9).
 
@@ -237,7 +235,7 @@ class Ripple(NamedTuple):
     """$\\gamma$ [rad], eq. (11)."""
 
 
-def residual_ripple(dalpha: Real[ArrayLike, " ..."], psi0: Scalar = PSI0_PAPER) -> Ripple:
+def residual_ripple(dalpha: RealLike, psi0: Scalar = PSI0_PAPER) -> Ripple:
     r"""Residual ripple left by a gauge misalignment $\Delta\alpha$, eqs. (10)-(12).
 
     $$\epsilon_1 + \epsilon_3 - \epsilon_2 - \epsilon_4 = 4\epsilon_t + \Psi\sin(2\beta+\gamma),
@@ -260,7 +258,7 @@ def residual_ripple(dalpha: Real[ArrayLike, " ..."], psi0: Scalar = PSI0_PAPER) 
 
 
 def misalignment_error_index(
-    dalpha: Real[ArrayLike, " ..."], psi0: Scalar = PSI0_PAPER, eps_rated: Scalar = EPS_RATED_PAPER
+    dalpha: RealLike, psi0: Scalar = PSI0_PAPER, eps_rated: Scalar = EPS_RATED_PAPER
 ) -> Float[Array, " ..."]:
     r"""Sensing inaccuracy index $E_R$ from a gauge misalignment, eq. (13).
 

@@ -16,7 +16,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, ArrayLike, Float, Real, Scalar
+from .._custom_types import Array, ArrayLike, Float, Real, RealLike, Scalar
 from .._errors import ConfigError
 from ..plant import PlantParams, PlantState, flexspline_torque, rk4_step, zero_state
 
@@ -49,9 +49,7 @@ class PlantJoint(eqx.Module):
     ) -> tuple[Float[Array, " ..."], Float[Array, " ..."], Float[Array, " ..."]]:
         return state.theta_m, state.theta_l, flexspline_torque(self.params, state)
 
-    def step(
-        self, state: PlantState, tau_m: Real[ArrayLike, " ..."], dt: Real[ArrayLike, ""]
-    ) -> PlantState:
+    def step(self, state: PlantState, tau_m: RealLike, dt: Real[ArrayLike, ""]) -> PlantState:
         new = rk4_step(self.params, state, tau_m, self.load_torque, dt)
         if self.constrained:
             new = eqx.tree_at(
