@@ -19,10 +19,7 @@ For each split this prints, as JSON:
 """
 
 import argparse
-import datetime
 import json
-import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -35,6 +32,7 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 
 import numpy as np  # noqa: E402
+from _long_logs import machine  # noqa: E402
 
 from hdjax import HdjaxError  # noqa: E402
 from hdjax.discover import DiscoverOptions, discover, refit_structure  # noqa: E402
@@ -87,6 +85,7 @@ def main():
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "lara8_splits.json")
     args = ap.parse_args()
     t0 = time.perf_counter()
+    meta = machine()  # the load at the start
     full, joint, opts = load()
     parts = {name: (full.select(~m), full.select(m)) for name, m in splits(full).items()}
     rows, terms = [], {}
@@ -119,11 +118,7 @@ def main():
                 cross[found][name] = f"refused: {err}"
     out = dict(
         benchmark="LARA8 joint 3, three splits",
-        date=datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
-        machine=platform.processor() or platform.machine(),
-        cpu_count=os.cpu_count(),
-        load_average=os.getloadavg()[0],
-        precision="float64",
+        **meta,
         splits=rows,
         cross_refit_test_rms=cross,
         seconds=time.perf_counter() - t0,
