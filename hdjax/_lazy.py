@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import importlib
-import threading
 
 from ._errors import ConfigError
 
@@ -37,25 +36,3 @@ def pysindy():
 def dask_distributed():
     """`dask.distributed`, imported on first use (the `fleet` extra)."""
     return _load("dask.distributed", "pip install 'hdjax[fleet]'")
-
-
-def prefetch(*loaders) -> threading.Thread:
-    """Run `loaders` (functions of this kind, e.g. `pysindy`) in a background thread.
-
-    A command that will need a heavy module later starts its import now, so that it overlaps
-    the command's own work on another core (pysindy and matplotlib take about 1.5 s of CPU
-    together). Nothing is reported from the thread: a failing import fails again, with its
-    message, where the module is used. Python's import locks make the later call wait for an
-    import still in progress.
-    """
-
-    def work():
-        for load in loaders:
-            try:
-                load()
-            except Exception:  # noqa: BLE001 - reported by the call where the module is used
-                pass
-
-    thread = threading.Thread(target=work, name="hdjax-prefetch", daemon=True)
-    thread.start()
-    return thread

@@ -21,9 +21,7 @@ from .. import __version__
 from .._errors import DataError, HdjaxError
 from .._io import load_recording, read_toml
 from .._joint import load_joint
-from .._lazy import prefetch, pysindy
 from .._memory import check_read_memory
-from .._plotting import pyplot
 from ..report import ResultDir
 from . import _loop  # `_loop.discover` looked up at call time, where a test stops the command
 from ._checks import check_inputs
@@ -138,8 +136,6 @@ def _config_inputs(path: Path) -> list[Path]:
 
 
 def _run_into(rd, args: argparse.Namespace) -> int:
-    # the selection's pysindy and the report's matplotlib load while the logs are read
-    prefetch(pysindy, *(() if args.no_figures else (pyplot,)))
     cfg_notes, cfg = [], {}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
