@@ -28,6 +28,7 @@ from ._base import (
     AbstractSignalTerm as AbstractSignalTerm,
     AbstractTerm as AbstractTerm,
     AbstractTorqueFreeTerm as AbstractTorqueFreeTerm,
+    AbstractTorqueScaleFamily as AbstractTorqueScaleFamily,
     Candidate as Candidate,
     CandidateContext as CandidateContext,
     PlantEffect as PlantEffect,

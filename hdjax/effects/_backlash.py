@@ -20,13 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, Float, Pointwise, PointwiseOut
-from ._base import (
-    AbstractFamily,
-    AbstractMemorylessTerm,
-    AbstractPlantEffect,
-    Candidate,
-    CandidateContext,
-)
+from ._base import AbstractMemorylessTerm, AbstractPlantEffect, AbstractTorqueScaleFamily
 from ._fields import bound, hyper, labels
 
 
@@ -74,7 +68,7 @@ def _defaults(rated: float, k1: float, given) -> dict:
     return dict(width=1.0 * _ARCMIN, torque_scale=0.02 * rated)
 
 
-class BacklashFamily(AbstractFamily):
+class BacklashFamily(AbstractTorqueScaleFamily):
     """Lost motion: plant `backlash`; term `Backlash`; a grid of widths $T_b$, fractions of the
     rated torque."""
 
@@ -83,9 +77,5 @@ class BacklashFamily(AbstractFamily):
     plant_effects: ClassVar[tuple] = (LostMotion.entry("backlash", "compliance", _defaults),)
     discover_families: ClassVar[tuple] = ("backlash:torque",)
     options: ClassVar[dict] = {"backlash_fractions": (0.005, 0.01, 0.02, 0.05)}
-
-    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
-        if not ctx.wants("backlash:torque"):
-            return []
-        fractions = ctx.option(self, "backlash_fractions")
-        return [Candidate.of(Backlash(width=f * ctx.rated_torque)) for f in fractions]
+    scale_field: ClassVar[str] = "width"
+    fractions_option: ClassVar[str] = "backlash_fractions"

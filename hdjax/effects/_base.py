@@ -553,3 +553,43 @@ class AbstractFamily(eqx.Module):
     @abc.abstractmethod
     def candidates(self, ctx: CandidateContext) -> list[Candidate]:
         """The candidate terms of this family for one step of the residual loop."""
+
+
+class AbstractTorqueScaleFamily(AbstractFamily):
+    r"""A family whose one term is a memoryless function of the torque with one torque scale,
+    offered at fractions of the rated torque $\tau_0$ (Song et al. eq. (7) places the compliance
+    knots at fractions of $\tau_0$ too).
+
+    **Class variables**, besides [`AbstractFamily`][]'s (one term, one discover family):
+
+    - `scale_field`: the term's field that holds the torque scale [N·m];
+    - `fractions`: the fractions of $\tau_0$ tried (default `(1.0,)`: the scale $\tau_0$);
+    - `fractions_option`: the name of a library option (one of `options`) that holds the
+      fractions instead, so a user may change the grid (default none).
+    """
+
+    scale_field: eqx.AbstractClassVar[str]
+    fractions: ClassVar[tuple[float, ...]] = (1.0,)
+    fractions_option: ClassVar[str | None] = None
+
+    def __check_init__(self):
+        owner = f"effect family {type(self).__name__}"
+        if len(self.terms) != 1 or len(self.discover_families) != 1:
+            raise ConfigError(
+                f"{owner}: a torque-scale family has one term and one discover family"
+            )
+        if self.scale_field not in {f.name for f in dataclasses.fields(self.terms[0])}:
+            raise ConfigError(f"{owner}: scale_field {self.scale_field!r} is no field of its term")
+        if self.fractions_option is not None and self.fractions_option not in self.options:
+            raise ConfigError(
+                f"{owner}: fractions_option {self.fractions_option!r} is not an option"
+            )
+
+    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
+        """One candidate of the family's term per fraction $f$: the scale $f\tau_0$."""
+        (term,), (key,) = self.terms, self.discover_families
+        if not ctx.wants(key):
+            return []
+        option = self.fractions_option
+        fractions = self.fractions if option is None else ctx.option(self, option)
+        return [Candidate.of(term(**{self.scale_field: f * ctx.rated_torque})) for f in fractions]

@@ -15,13 +15,7 @@ from typing import ClassVar
 import numpy as np
 
 from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut
-from ._base import (
-    AbstractFamily,
-    AbstractMemorylessTerm,
-    AbstractPlantEffect,
-    Candidate,
-    CandidateContext,
-)
+from ._base import AbstractMemorylessTerm, AbstractPlantEffect, AbstractTorqueScaleFamily
 from ._fields import bound, hyper, labels
 
 
@@ -57,7 +51,7 @@ def _defaults(rated: float, k1: float, given) -> dict:
     return dict(cubic=0.1 * rated / (rated * k1 * 1.0) ** 3)
 
 
-class StiffeningFamily(AbstractFamily):
+class StiffeningFamily(AbstractTorqueScaleFamily):
     """Stiffening: plant `stiffening`; term `Stiffening`; one candidate, at the rated torque
     $\\tau_0$."""
 
@@ -65,8 +59,4 @@ class StiffeningFamily(AbstractFamily):
     terms: ClassVar[tuple] = (Stiffening,)
     plant_effects: ClassVar[tuple] = (CubicSpring.entry("stiffening", "spring", _defaults),)
     discover_families: ClassVar[tuple] = ("stiffness:torque",)
-
-    def candidates(self, ctx: CandidateContext) -> list[Candidate]:
-        if not ctx.wants("stiffness:torque"):
-            return []
-        return [Candidate.of(Stiffening(torque_scale=float(ctx.rated_torque)))]
+    scale_field: ClassVar[str] = "torque_scale"
