@@ -8,6 +8,7 @@ Switchable effects live in the `effects` dict (name -> effect module, see
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 from collections.abc import Mapping
 
@@ -18,23 +19,12 @@ import numpy as np
 from .. import effects as _effects_registry
 from .._custom_types import Array, ArrayInput, Float
 from .._errors import ConfigError, check_keys, did_you_mean
+from ..effects import bound
 from ._effects import _concrete, check_effect_name, make_effect
 
 _f64 = lambda x: jnp.asarray(x, jnp.float64)
 
 FLEXSPLINE_KINDS = ("piecewise", "smooth")
-
-_SCALARS = {
-    "ratio": "positive",
-    "rated_torque": "positive",
-    "inertia_m": "positive",
-    "inertia_l": "positive",
-    "torque_constant": "positive",
-    "current_time_constant": "positive",
-    "damping": "nonneg",
-    "corner": "positive",
-}
-"""The scalar parameters and their sign: positive, or non-negative (a joint may be undamped)."""
 
 
 class PlantParams(eqx.Module):
@@ -60,15 +50,16 @@ class PlantParams(eqx.Module):
       generator, backlash or the smooth flexspline make it non-piecewise-linear (static).
     """
 
-    ratio: Float[Array, ""]
-    rated_torque: Float[Array, ""]
-    inertia_m: Float[Array, ""]
-    inertia_l: Float[Array, ""]
-    torque_constant: Float[Array, ""]
-    current_time_constant: Float[Array, ""]
+    # the scalars with their sign, checked in __check_init__ (a joint may be undamped)
+    ratio: Float[Array, ""] = bound("positive")
+    rated_torque: Float[Array, ""] = bound("positive")
+    inertia_m: Float[Array, ""] = bound("positive")
+    inertia_l: Float[Array, ""] = bound("positive")
+    torque_constant: Float[Array, ""] = bound("positive")
+    current_time_constant: Float[Array, ""] = bound("positive")
     compliance: Float[Array, " n_segments"]  # five (eq. (7)), checked in __check_init__
-    damping: Float[Array, ""]
-    corner: Float[Array, ""]
+    damping: Float[Array, ""] = bound("nonneg")
+    corner: Float[Array, ""] = bound("positive")
     effects: dict
     flexspline: str = eqx.field(static=True, default="piecewise")
     newton_iterations: int = eqx.field(static=True, default=3)
@@ -118,6 +109,12 @@ class PlantParams(eqx.Module):
     def effect_names(self) -> tuple[str, ...]:
         """Switched-on effects in registry order."""
         return tuple(n for n in _effects_registry.plant_effect_names() if n in self.effects)
+
+
+_SCALARS = {
+    f.name: f.metadata["bound"] for f in dataclasses.fields(PlantParams) if "bound" in f.metadata
+}
+"""The scalar parameters and their sign (`"positive"` or `"nonneg"`), from their fields."""
 
 
 def _k1(params) -> float:
