@@ -30,9 +30,7 @@ from ..._custom_types import Array, ArrayLike, Float, PRNGKeyArray, Real, Scalar
 from ..._errors import ConfigError, DivergenceError
 from ..._solution import Solution
 from .._mlp import Network
-from ._result import check_count, check_rate, prepare, train_solution
-
-_DIVERGENCE_FACTOR = 100.0
+from ._result import check_count, check_rate, checked_loop, prepare, train_solution
 
 
 def backprop_step(
@@ -80,29 +78,20 @@ def _global_error(weights, biases, z, t):
 def _train(weights, biases, z, t, zv, tv, key, mu, eta, target, check_every, n_checks):
     m = z.shape[0]
     e0 = _global_error(weights, biases, z, t)
-    limit = _DIVERGENCE_FACTOR * jnp.maximum(e0, 0.5)
 
-    def _chunk(carry):
-        weights, biases, i, _, hist, vhist = carry
+    def _chunk(wb, i):
         idx = jax.random.randint(jax.random.fold_in(key, i), (check_every,), 0, m)
 
         def _learn(wb, k):
             return backprop_step(*wb, z[k], t[k][None], mu, eta), None
 
         # Random sample, forward, backward, correct: check_every learnings (eqs. (36)-(46)).
-        (weights, biases), _ = jax.lax.scan(_learn, (weights, biases), idx)
-        err = _global_error(weights, biases, z, t)
-        verr = jnp.sqrt(2.0 * _global_error(weights, biases, zv, tv))
-        return weights, biases, i + 1, err, hist.at[i].set(err), vhist.at[i].set(verr)
+        wb, _ = jax.lax.scan(_learn, wb, idx)
+        err = _global_error(*wb, z, t)
+        return wb, err, jnp.sqrt(2.0 * _global_error(*wb, zv, tv))
 
-    def _go_on(carry):
-        _, _, i, err, _, _ = carry
-        return (i < n_checks) & (err > target) & jnp.isfinite(err) & (err < limit)
-
-    hist = jnp.full((n_checks,), jnp.nan)
-    init = (weights, biases, jnp.asarray(0), e0, hist, hist)
-    weights, biases, i, err, hist, vhist = jax.lax.while_loop(_go_on, _chunk, init)
-    return weights, biases, i, err, hist, vhist, limit
+    short = lambda err, _: err > target
+    return checked_loop(_chunk, (weights, biases), e0, n_checks, short, floor=0.5)
 
 
 def train_backprop(
@@ -153,7 +142,7 @@ def train_backprop(
     network, z, t, zv, tv = prepare(network, x, y, x_val, y_val, normalise)
     n_checks = -(-max_learnings // check_every)
     f64 = lambda v: jnp.asarray(v, jnp.float64)
-    weights, biases, i, err, hist, vhist, limit = _train(
+    run = _train(
         network.weights,
         network.biases,
         f64(z),
@@ -167,19 +156,19 @@ def train_backprop(
         check_every,
         n_checks,
     )
-    i, err = int(i), float(err)
-    if not np.isfinite(err) or err >= float(limit):
+    i, err = int(run.checks), float(run.loss)
+    if bool(run.diverged):
         raise DivergenceError(
             f"back-propagation diverged after {i * check_every} learnings (global error "
             f"E={err:.3g}, eq. (42)); the learning rates mu={mu:g}, eta={eta:g} are too large "
             f"for this network; try mu={mu / 10:g}, eta={eta / 10:g}"
         )
-    trained = eqx.tree_at(lambda n: (n.weights, n.biases), network, (weights, biases))
     return train_solution(
-        trained,
-        history=hist[:i],
-        val_rmse=vhist[:i] * (float(network.y_scale) if x_val is not None else np.nan),
-        steps=i * check_every,
+        network,
+        run.carry,
+        run,
+        every=check_every,
+        val_scale=float(network.y_scale) if x_val is not None else np.nan,
         target=error_target > 0,
         reached=err <= error_target,
         t0=t0,

@@ -21,14 +21,13 @@ from ..._custom_types import ArrayLike, PRNGKeyArray, Real
 from ..._errors import ConfigError, DivergenceError
 from ..._solution import Solution
 from .._mlp import Network
-from ._result import check_count, check_rate, prepare, train_solution
+from ._result import check_count, check_rate, checked_loop, prepare, train_solution
 
 _OPTIMIZERS: dict[str, Callable[[float], optax.GradientTransformation]] = {
     "adam": optax.adam,
     "adamw": optax.adamw,
     "sgd": optax.sgd,
 }
-_DIVERGENCE_FACTOR = 100.0
 
 
 def _mse(trainable, network, z, t):
@@ -43,7 +42,6 @@ def _train(network, z, t, zv, tv, key, lr, target, factory, batch, eval_every, n
     state = opt.init(trainable)
     m = z.shape[0]
     loss0 = _mse(trainable, network, z, t)
-    limit = _DIVERGENCE_FACTOR * jnp.maximum(loss0, 1.0)
 
     def _step(carry, k):
         trainable, state, _ = carry
@@ -59,21 +57,14 @@ def _train(network, z, t, zv, tv, key, lr, target, factory, batch, eval_every, n
         trainable = optax.apply_updates(trainable, updates)
         return (trainable, state, value), None
 
-    def _chunk(carry):
-        trainable, state, i, _, _, hist, vhist = carry
+    def _chunk(carry, i):
+        trainable, state = carry
         keys = jax.random.split(jax.random.fold_in(key, i), eval_every)
         (trainable, state, loss), _ = jax.lax.scan(_step, (trainable, state, loss0), keys)
-        vrmse = jnp.sqrt(_mse(trainable, network, zv, tv))
-        return trainable, state, i + 1, loss, vrmse, hist.at[i].set(loss), vhist.at[i].set(vrmse)
+        return (trainable, state), loss, jnp.sqrt(_mse(trainable, network, zv, tv))
 
-    def _go_on(carry):
-        _, _, i, loss, vrmse, _, _ = carry
-        return (i < n_checks) & (vrmse > target) & jnp.isfinite(loss) & (loss < limit)
-
-    hist = jnp.full((n_checks,), jnp.nan)
-    init = (trainable, state, jnp.asarray(0), loss0, jnp.asarray(jnp.inf), hist, hist)
-    trainable, _, i, loss, vrmse, hist, vhist = jax.lax.while_loop(_go_on, _chunk, init)
-    return trainable, i, loss, vrmse, hist, vhist, limit
+    short = lambda _, vrmse: vrmse > target
+    return checked_loop(_chunk, (trainable, state), loss0, n_checks, short, floor=1.0)
 
 
 def train_optax(
@@ -142,7 +133,7 @@ def train_optax(
     f64 = lambda v: jnp.asarray(v, jnp.float64)
     # optax mixes Python floats with int32 step counts; allow that under strict promotion.
     with jax.numpy_dtype_promotion("standard"):
-        trainable, i, loss, vrmse, hist, vhist, limit = _train(
+        run = _train(
             network,
             f64(z),
             f64(t),
@@ -156,20 +147,20 @@ def train_optax(
             eval_every,
             n_checks,
         )
-    i, loss = int(i), float(loss)
-    if not np.isfinite(loss) or loss >= float(limit):
+    i, loss = int(run.checks), float(run.loss)
+    if bool(run.diverged):
         name = factory.__name__ if hasattr(factory, "__name__") else "optimizer"
         raise DivergenceError(
             f"{name} training diverged after {i * eval_every} steps (loss {loss:.3g}); the "
             f"learning rate {lr:g} is too large; try learning_rate={lr / 10:g}"
         )
-    trained = eqx.tree_at(lambda n: (n.weights, n.biases), network, trainable)
     return train_solution(
-        trained,
-        history=hist[:i],
-        val_rmse=vhist[:i] * (y_scale if x_val is not None else np.nan),
-        steps=i * eval_every,
+        network,
+        run.carry[0],
+        run,
+        every=eval_every,
+        val_scale=y_scale if x_val is not None else np.nan,
         target=target_rmse is not None,
-        reached=float(vrmse) <= target,
+        reached=float(run.val) <= target,
         t0=t0,
     )
