@@ -560,7 +560,8 @@ class AbstractTorqueScaleFamily(AbstractFamily):
     offered at fractions of the rated torque $\tau_0$ (Song et al. eq. (7) places the compliance
     knots at fractions of $\tau_0$ too).
 
-    **Class variables**, besides [`AbstractFamily`][]'s (one term, one discover family):
+    **Class variables**, besides those of [`hdjax.effects.AbstractFamily`][] (one term, one
+    discover family):
 
     - `scale_field`: the term's field that holds the torque scale [N·m];
     - `fractions`: the fractions of $\tau_0$ tried (default `(1.0,)`: the scale $\tau_0$);

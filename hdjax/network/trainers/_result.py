@@ -24,7 +24,7 @@ DIVERGENCE_FACTOR = 100.0
 class CheckedRun(
     collections.namedtuple("CheckedRun", "carry checks loss val history val_history diverged")
 ):
-    """What [`checked_loop`][] returns (a pytree, so a jitted trainer returns it whole): the
+    """What `checked_loop` returns (a pytree, so a jitted trainer returns it whole): the
     trainer's `carry`, the number of `checks` made, the last `loss` and validation value `val`,
     their `history` and `val_history` (NaN past the checks made), and whether the run
     `diverged`."""
