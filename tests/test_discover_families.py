@@ -11,9 +11,21 @@ plant draws against the true structure refitted.
   output-bearing Stribeck friction, and its TEST torque RMS stays within 1.5x that of the true
   structure refitted by the same pipeline. On the same joints with the Stribeck peak set to zero
   (plain Coulomb friction) it names Coulomb and no Stribeck.
+- **Output-side ripple**: a 2-per-output-revolution ripple of 2-5 % (an oval output bearing or
+  flexspline, plant `ripple_l`) on a link that swings ±360° under a gravity load whose arm
+  changes once per 10 s period (20 s at 4 ms, so the load is not one function of the angle): the
+  loop names `ripple:theta_l:2` (not the kinematic orders 1 and 3 that $T \\sin 2\\theta_l$ with
+  $T \\propto \\cos\\theta_l$ also contains) and reaches the true structure. Order 1 is offered
+  only over three output revolutions (`ripple_min_periods`).
+- **Motor-side Stribeck friction** (plant `stribeck_m` with `coulomb_m`): the motor's friction
+  enters the current, not the transmitted torque that the twist follows, and the starting
+  model's torque segments carry the compliance, so on the bench it leaves nothing in the twist:
+  the true structure refitted is no better than the starting model, and the loop must add no
+  friction term of either side.
 
-The draws share one structure (ripple, Coulomb and Stribeck effects all switched on, the absent
-ones at zero amplitude), so they are one compiled simulation.
+The draws on the `slow` and `fast` scenarios share one structure (ripple, Coulomb and Stribeck
+effects all switched on, the absent ones at zero amplitude), so they are one compiled
+simulation; the swing of the output-side ripple is another.
 """
 
 import math
@@ -38,19 +50,23 @@ RIPPLE_OPTIONS = DiscoverOptions(max_effects=1, current_scale=10.0)
 N_DRAWS = 2
 
 
-def _params(ripple=0.0, phase=0.0, level=0.0, peak=0.0, speed=0.02):
+def _params(ripple=0.0, phase=0.0, level=0.0, peak=0.0, speed=0.02, motor=(0.0, 0.0, 2.0)):
+    level_m, peak_m, speed_m = motor
     eff = {
         "wg_compliance": True,
         "ripple_m": dict(orders=[2.0], amplitudes=[ripple], phases=[phase]),
         "coulomb_l": dict(level=level, smoothing=5e-3),
         "stribeck_l": dict(peak=peak, speed=speed, smoothing=5e-3),
+        "coulomb_m": dict(level=level_m, smoothing=0.5),
+        "stribeck_m": dict(peak=peak_m, speed=speed_m, smoothing=0.5),
     }
     return plant.song_params(defaults=False, effects=eff, damping=0.0)
 
 
 @pytest.fixture(scope="module")
 def draws():
-    """`{kind: [(train, test, true terms), ...]}` for kinds ripple, stribeck and coulomb."""
+    """`{kind: [(train, test, true terms), ...]}` for kinds ripple, stribeck, coulomb and
+    stribeck_m (motor-side Coulomb and Stribeck friction)."""
     rng = np.random.default_rng(1402)
     specs = []
     for _ in range(N_DRAWS):
@@ -64,6 +80,10 @@ def draws():
         specs.append(("stribeck", "fast", _params(level=level, peak=peak, speed=speed), true))
         # the same joint without the Stribeck excess: plain Coulomb friction
         specs.append(("coulomb", "fast", _params(level=level, speed=speed), true[:1]))
+    for _ in range(N_DRAWS):
+        motor = rng.uniform(0.15, 0.3), rng.uniform(0.2, 0.4), rng.uniform(1.0, 3.0)
+        true = [Coulomb("omega_m", 0.5), Stribeck("omega_m", 0.5, motor[2])]
+        specs.append(("stribeck_m", "fast", _params(motor=motor), true))
     params = [p for _, _, p, _ in specs for _ in (0, 1)]
     scenarios = [s for _, s, _, _ in specs for _ in (0, 1)]
     recs = simulate_draws(
@@ -150,6 +170,30 @@ def test_ripple_order_comes_from_the_spectrum_of_residual_over_torque(draws):
 # -- the loop on plant draws ---------------------------------------------------------------------
 
 
+@pytest.fixture(scope="module")
+def output_ripple():
+    """`[(train, test, true terms), ...]`: drawn 2-per-output-revolution ripples, ±360° swing."""
+    rng = np.random.default_rng(1404)
+    params, true = [], []
+    for _ in range(N_DRAWS):
+        amp, phase = rng.uniform(0.02, 0.05), rng.uniform(0.0, 2 * math.pi)
+        eff = {
+            "wg_compliance": True,
+            "ripple_l": dict(orders=[2.0], amplitudes=[amp], phases=[phase]),
+        }
+        params += [plant.song_params(defaults=False, effects=eff, damping=0.0)] * 2
+        true.append([Ripple("theta_l", 2.0, RATED)])
+    recs = simulate_draws(
+        params,
+        ["slow"] * len(params),
+        range(600, 600 + len(params)),
+        duration=20.0,
+        output_period=4e-3,
+        swing=(2 * math.pi, 10.0),
+    )
+    return [(recs[2 * i], recs[2 * i + 1], t) for i, t in enumerate(true)]
+
+
 def _run(train, test, true, options=OPTIONS):
     res = discover(train, test, JOINT, options).aux
     ref = refit_structure(train, test, JOINT, true, OPTIONS)
@@ -175,4 +219,22 @@ def test_loop_names_stribeck_friction_and_keeps_coulomb_for_coulomb(draws):
         res, ref = _run(train, test, true)
         assert "coulomb:omega_l" in res.effects, res.effects
         assert not any(k.startswith("stribeck") for k in res.effects), res.effects
+        assert res.final.rms <= 1.5 * ref.rms, (res.final.rms, ref.rms)
+
+
+@pytest.mark.slow
+def test_loop_names_an_output_side_compliance_ripple(output_ripple):
+    for train, test, true in output_ripple:
+        res, ref = _run(train, test, true, RIPPLE_OPTIONS)
+        assert res.effects == ["ripple:theta_l:2"], res.effects
+        assert res.final.rms <= 1.5 * ref.rms, (res.final.rms, ref.rms)
+
+
+@pytest.mark.slow
+def test_motor_side_stribeck_leaves_nothing_in_the_twist_and_nothing_is_added(draws):
+    for train, test, true in draws["stribeck_m"]:
+        res, ref = _run(train, test, true)
+        # the true structure gains nothing over the starting model: nothing to find
+        assert ref.rms >= 0.98 * res.baseline.rms, (ref.rms, res.baseline.rms)
+        assert res.effects == [], res.effects
         assert res.final.rms <= 1.5 * ref.rms, (res.final.rms, ref.rms)
