@@ -314,12 +314,35 @@ def calibrate_stream(
     """
     t0 = time.perf_counter()
     _check_chunk(chunk)
+    return calibrate_chunks(
+        model, lambda: _passes(model, stream, chunk), label=stream.label, throw=throw, t0=t0
+    )
+
+
+def calibrate_chunks(
+    model: ComplianceModel,
+    passes: Callable[[], Iterable[tuple]],
+    *,
+    label: str,
+    throw: bool = True,
+    refine_above: float = REFINE_ABOVE_COND,
+    t0: float | None = None,
+) -> Solution:
+    """[`calibrate_stream`][] from design chunks (Song et al. eqs. (15)-(17)).
+
+    `passes()` starts a pass over the data: an iterator of `(x, b, torque, seg)` per chunk,
+    `x` the compact columns (`q x rows`, as `_compact_column_list` orders them), `b` the twist,
+    `torque` the reference torque and `seg` each row's torque segment. The refinement pass
+    runs above the scaled condition number `refine_above` (0: always, as
+    [`hdjax.compliance.calibrate_lstsq`][] does).
+    """
+    t0 = time.perf_counter() if t0 is None else t0
     n_seg, p = model.n_segments, model.n_coef
     ne = NormalEquations(p)
     counts = np.zeros(n_seg, dtype=np.int64)
     t_lo, t_hi = np.full(n_seg, np.inf), np.full(n_seg, -np.inf)
     # -- pass 1: Gram matrix, segment counts and torque ranges ------------------------------
-    for x, b, tq, seg in _passes(model, stream, chunk):
+    for x, b, tq, seg in passes():
         for idx, rows in _blocks(model, x, seg):
             ne.add(x[:, rows], b[rows], idx)
         ne.add_rhs(b)
@@ -330,14 +353,14 @@ def calibrate_stream(
             t_lo[s_], t_hi[s_] = min(t_lo[s_], sel.min()), max(t_hi[s_], sel.max())
     g, atb, btb, n = ne.total()
     if n == 0:
-        raise DataError(f"{stream.label}: the stream holds no samples")
+        raise DataError(f"{label}: the stream holds no samples")
     active, counts_t, dropped = select_active_counts(model, np.diag(g) > 0, counts)
     n_act = int(active.sum())
     check_sample_count(n, n_act)
     collinear: tuple = ()
     csne = scaled_cholesky(g, atb, active, CSNE_MAX_COND)
     # -- pass 2: refinement with the true residual, or the QR factor ------------------------
-    if csne is not None and csne[1] <= REFINE_ABOVE_COND:
+    if csne is not None and csne[1] <= refine_above:
         # well conditioned: the semi-normal equations are already accurate to kappa^2 u
         coef, cond, _ = csne
         rss = btb - 2.0 * coef @ atb + coef @ g @ coef
@@ -345,7 +368,7 @@ def calibrate_stream(
     elif csne is not None:
         coef, cond, solve = csne
         atr, rss0 = np.zeros(p), 0.0
-        for x, b, _, seg in _passes(model, stream, chunk):
+        for x, b, _, seg in passes():
             r = np.array(b, copy=True)
             blocks = _blocks(model, x, seg)
             for idx, rows in blocks:
@@ -360,7 +383,7 @@ def calibrate_stream(
     else:
         norms = np.sqrt(np.diag(g))
         qr = StreamingQR(norms[active])
-        for x, b, _, seg in _passes(model, stream, chunk):
+        for x, b, _, seg in passes():
             dense = np.zeros((b.shape[0], p))
             for idx, rows in _blocks(model, x, seg):
                 if isinstance(rows, slice):

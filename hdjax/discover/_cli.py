@@ -25,6 +25,7 @@ from .._memory import check_read_memory
 from ..report import ResultDir
 from . import _loop  # `_loop.discover` looked up at call time, where a test stops the command
 from ._checks import check_inputs
+from ._chunked import check_chunk
 from ._config import load_discover_config
 from ._report import write_report
 
@@ -97,6 +98,15 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
         "in the standard folds and in at least 70 %% of resampled fold assignments (default 0.05)",
     )
     p.add_argument(
+        "--chunk",
+        type=int,
+        default=0,
+        metavar="N",
+        help="accumulate the loop's least-squares fits (calibration, cross-validation, "
+        "candidate scores, intervals) over chunks of N samples (at least 16), so no design of "
+        "the whole record is held; 0: the whole record at once (default 0)",
+    )
+    p.add_argument(
         "--ignore-column",
         action="append",
         default=[],
@@ -156,6 +166,9 @@ def _run_into(rd, args: argparse.Namespace) -> int:
         n_segments=int(cfg.get("n_segments", 5)),
         poly_order=int(cfg.get("poly_order", 6)),
         fourier_order=int(cfg.get("fourier_order", 3)),
+        chunk=check_chunk(
+            cfg.get("chunk", args.chunk), "[discover] chunk" if "chunk" in cfg else "--chunk"
+        ),
     )
     ignore = tuple(args.ignore_column) + tuple(cfg.get("ignore_columns", ()))
     notes = check_inputs(

@@ -17,6 +17,7 @@ t = "Timestamp"
 [discover]
 max_effects = 5
 min_gain = 0.05
+chunk = 0                            # > 0: fits accumulated over chunks of this many samples
 ```
 """
 
@@ -40,6 +41,7 @@ _DISCOVER_KEYS = (
     "poly_order",
     "fourier_order",
     "families",
+    "chunk",
 )
 
 

@@ -148,6 +148,76 @@ def block_statistics_batched(a, batches, y, blocks, *, chunk: int = CHUNK) -> Bl
     )
 
 
+def block_statistics_streamed(passes, y, blocks, select) -> BlockStatistics:
+    """[`block_statistics`][] from rows that arrive chunk by chunk, so neither the base design
+    nor any candidate's columns are ever held for the whole record.
+
+    `passes()` starts a pass over the record: an iterator of `(lo, hi, a, groups)`, the base
+    design's rows `lo:hi` and every candidate group's (a list of `(hi - lo, w)` arrays, the
+    same groups in every chunk); chunk boundaries may fall anywhere (a block's sums are
+    accumulated over the chunks it spans). Two passes: the first sums $A^\top A$, $A^\top y$
+    and $A^\top C$; then `select()` gives the indices of the groups to keep (what the first
+    pass found usable), and the second sums the per-block statistics of `y` and the kept
+    groups made orthogonal to the base, as [`block_statistics_batched`][] does. `y` is the
+    target over the whole record.
+    """
+    y = np.asarray(y, np.float64)
+    bounds = _block_bounds(np.asarray(blocks))
+    n_blocks = bounds.size - 1
+    aa = ay = ac = None
+    widths_all: list[int] = []
+    for lo, hi, a, groups in passes():
+        if aa is None:
+            p = a.shape[1]
+            widths_all = [int(g.shape[1]) for g in groups]
+            aa, ay = np.zeros((p, p)), np.zeros(p)
+            ac = np.zeros((p, sum(widths_all)))
+        aa += a.T @ a
+        ay += a.T @ y[lo:hi]
+        if groups:
+            ac += a.T @ np.concatenate(groups, axis=1)
+    keep = [int(i) for i in select()]
+    offsets = np.cumsum([0, *widths_all])
+    keep_cols = np.concatenate([np.arange(offsets[i], offsets[i + 1]) for i in keep] or [[]])
+    keep_cols = keep_cols.astype(int)
+    if p:
+        d = np.sqrt(np.diag(aa))
+        d[d == 0] = 1.0
+        aa_scaled = aa / np.outer(d, d)
+        rhs = np.column_stack([ay, ac[:, keep_cols]])
+        proj = np.linalg.lstsq(aa_scaled, rhs / d[:, None], rcond=1e-13)[0] / d[:, None]
+        wy, wc = proj[:, 0], proj[:, 1:]
+    else:
+        wy, wc = np.zeros(0), np.zeros((0, keep_cols.size))
+    widths = tuple(widths_all[i] for i in keep)
+    by_width, cols = _by_width(widths)
+    c_total = int(keep_cols.size)
+    ab = np.zeros((n_blocks, p + 1, p + 1 + c_total))
+    cc = {w: np.zeros((n_blocks, len(idx), w, w)) for w, idx in by_width.items()}
+    for lo, hi, a, groups in passes():
+        yt = y[lo:hi] - a @ wy
+        m = np.concatenate([groups[i] for i in keep], axis=1) if keep else np.zeros((hi - lo, 0))
+        m = m - a @ wc
+        b0 = int(np.searchsorted(bounds, lo, side="right")) - 1
+        j = b0
+        while j < n_blocks and bounds[j] < hi:
+            r = slice(max(bounds[j], lo) - lo, min(bounds[j + 1], hi) - lo)
+            ar, yr, cr = a[r], yt[r], m[r]
+            ab[j, :p, :p] += ar.T @ ar
+            ab[j, :p, p] += ar.T @ yr
+            ab[j, p, :p] += ar.T @ yr
+            ab[j, p, p] += yr @ yr
+            ab[j, :p, p + 1 :] += ar.T @ cr
+            ab[j, p, p + 1 :] += yr @ cr
+            for w, ci in cols.items():
+                x = cr[:, ci]
+                cc[w][j] += np.einsum("nga,ngb->gab", x, x)
+            j += 1
+    return BlockStatistics(
+        ab, cc, {w: np.asarray(idx) for w, idx in by_width.items()}, cols, p, len(widths), widths
+    )
+
+
 def _by_width(widths) -> tuple[dict[int, list[int]], dict[int, np.ndarray]]:
     """Groups laid side by side with these column `widths`, bucketed by width.
     **Returns:** `(by_width, cols)`: per width, the groups' positions, and their column

@@ -44,17 +44,21 @@ from .._solution import RESULTS, Solution
 from ..compliance import ComplianceModel, merge_sparse_segments
 from ..compliance._lstsq import CalibrationData, failure_message, prepare
 from ..effects import AbstractTerm
+from ._chunked import Chunks, DahlCarry, check_chunk, sequential
+from ._chunked_fits import twist_residual
 from ._folds import (
     contiguous_blocks,
     correlation_length,
     cv_block_length,
     fold_assignment,
 )
-from ._gram import block_statistics_batched, fold_gains
+from ._gram import block_statistics_batched, block_statistics_streamed, fold_gains
 from ._library import LibraryOptions, build_library, candidate_columns
 from ._pipeline import (
     PipelineData,
     calibrate,
+    canonical,
+    chunks_of,
     cross_validate,
     design,
     estimate,
@@ -99,6 +103,13 @@ class DiscoverOptions:
     fourier_order: int = 3
     per_segment: bool = False
     current_scale: float | None = None
+    chunk: int = 0
+    """Samples per chunk of the loop's least-squares fits (calibration, cross-validation,
+    candidate scores, intervals), so that no design of the whole record is formed; 0: the
+    whole record at once ([`hdjax.discover._chunked`][])."""
+
+    def __post_init__(self):
+        check_chunk(self.chunk)
 
 
 @dataclasses.dataclass
@@ -158,10 +169,10 @@ def _merge_knot(model: ComplianceModel, j: int) -> ComplianceModel:
     return model.restructured(knots=[k for k in model.knots if k != knot])
 
 
-def _calibrate_monotone(model, train, notes):
+def _calibrate_monotone(model, train, notes, chunk=0):
     """Calibrate; while an outer segment's compliance comes out non-positive, merge it inwards."""
     while True:
-        res = _quiet_calibrate(model, train, notes, throw=False)
+        res = _quiet_calibrate(model, train, notes, throw=False, chunk=chunk)
         k = np.asarray(res.value.k)
         act = np.asarray(res.value.active[: model.n_segments])
         bad = [
@@ -218,7 +229,9 @@ def calibrate_baseline(
         model, merged = merge_sparse_segments(model, np.asarray(train.torque))
         trial_notes = list(merged)
         try:
-            res = _calibrate_monotone(model, _as_data(model, train).pair(), trial_notes)
+            res = _calibrate_monotone(
+                model, _as_data(model, train).pair(), trial_notes, options.chunk
+            )
         except (CalibrationError, InversionError) as err:
             last = err
             notes.append(f"starting model {kw} not calibrated: {err}")
@@ -243,13 +256,21 @@ def _test_errors(model, test, rated):
     return error_metrics(torque, data.torque, rated), torque
 
 
-def _twist_rms(model, data, driver=None) -> float:
+def _twist_rms(model, data, driver=None, chunk=0) -> float:
     data = _as_data(model, data)
     if driver is None and has_path(model):
         driver = estimate(model, data)
-    sig, torque = data.pair(driver)
-    r = np.asarray(sig.twist) - design(model, sig, torque) @ np.asarray(model.coef)
+    r = _residual(model, data, driver, chunk)
     return float(np.sqrt(np.mean(r**2)) * ARCSEC)
+
+
+def _residual(model, data: PipelineData, driver, chunk: int) -> np.ndarray:
+    """The twist residual of `model` on `data` (hysteresis driven by `driver`), the design
+    formed whole or, with `chunk`, chunk by chunk."""
+    sig, torque = data.pair(driver)
+    if chunk:
+        return twist_residual(canonical(model), chunks_of(sig, torque, chunk))
+    return np.asarray(sig.twist) - design(model, sig, torque) @ np.asarray(model.coef)
 
 
 def _usable_columns(train: Recording) -> tuple[str, ...]:
@@ -337,6 +358,69 @@ def _streamed_scores(cands, sig, torque, a, y, resid, blocks, options, phase):
     return selected, np.asarray(owner), usable, stats
 
 
+def _chunked_scores(cands, model, chunks: Chunks, resid, blocks, options, phase):
+    """[`_streamed_scores`][] with the base design and every candidate's columns formed chunk
+    by chunk ([`hdjax.discover._gram.block_statistics_streamed`][]); the Dahl states of
+    hysteresis candidates carry across chunks. The sparse regression reads the same rows
+    (every `step`-th sample), gathered during the first pass."""
+    model = canonical(model)
+    n = chunks.n
+    step = max(1, n // MAX_SINDY_ROWS)
+    active = np.asarray(model.active)
+    widths = []
+    lo_hi = []  # per candidate column: running minimum and maximum
+    thin_a, thin_c = [], []
+    first = [True]
+
+    def passes():
+        carry = DahlCarry()
+        for lo, hi, sc, tc, a_full in chunks.rows(model):
+            a = a_full if active.all() else np.compress(active, a_full, axis=1)
+            rows = hi - lo
+            groups = []
+            for i, cand in enumerate(cands):
+                if sequential(cand.term):
+                    c = carry.column(i, cand.term, sc, tc, rows, cand.term.score_in_numpy)
+                    c = c[:, None]
+                else:
+                    c = candidate_columns(cand.term, sc, tc)[:rows]
+                groups.append(np.asarray(c, np.float64))
+            if first[0]:
+                start = (-lo) % step
+                thin_a.append(a[start::step])
+                thin_c.append([g[start::step] for g in groups])
+                lo_hi.append([(g.min(axis=0), g.max(axis=0)) for g in groups])
+            yield lo, hi, a, groups
+        first[0] = False
+
+    def usable_groups():
+        for i in range(len(cands)):
+            lo_ = np.min([m[i][0] for m in lo_hi], axis=0)
+            hi_ = np.max([m[i][1] for m in lo_hi], axis=0)
+            finite = np.all(np.isfinite(lo_)) and np.all(np.isfinite(hi_))
+            if finite and np.any(hi_ > lo_):
+                widths.append(i)
+        return widths
+
+    with phase("twist CV"):  # the candidates' columns included
+        stats = block_statistics_streamed(passes, chunks.sig.twist, blocks, usable_groups)
+    with phase("sindy"):
+        thin, owner = [], []
+        for i in range(len(cands)):
+            cat = np.concatenate([t[i] for t in thin_c])
+            for j in range(cat.shape[1]):
+                thin.append(np.ascontiguousarray(cat[:, j]))
+                owner.append(i)
+        selected = sindy_select(
+            np.concatenate(thin_a),
+            resid[::step],
+            thin,
+            [str(o) for o in owner],
+            threshold=options.sindy_threshold,
+        )
+    return selected, np.asarray(owner), widths, stats
+
+
 def score_candidates(
     model,
     train,
@@ -360,15 +444,20 @@ def score_candidates(
     """
     phase = phases or null_phases()
     data = _as_data(model, train)
+    chunk = options.chunk
     with phase("design"):
         sig, torque = training_data(model, data, est)
-        a_full = design(model, sig, torque)
-        active = np.asarray(model.active)
-        # np.compress copies the active columns several times faster than a[:, active]
-        a = a_full if active.all() else np.compress(active, a_full, axis=1)
         y = np.asarray(sig.twist)
-        resid = y - a_full @ np.asarray(model.coef)
-        del a_full
+        if chunk:
+            a = None
+            resid = twist_residual(canonical(model), chunks_of(sig, torque, chunk))
+        else:
+            a_full = design(model, sig, torque)
+            active = np.asarray(model.active)
+            # np.compress copies the active columns several times faster than a[:, active]
+            a = a_full if active.all() else np.compress(active, a_full, axis=1)
+            resid = y - a_full @ np.asarray(model.coef)
+            del a_full
     with phase("library"):
         cands, spectra = build_library(
             sig,
@@ -385,9 +474,14 @@ def score_candidates(
         if not cands:
             return [], spectra, resid
     if blocks is not None and folds is not None:
-        selected, owner, usable, stats = _streamed_scores(
-            cands, sig, torque, a, y, resid, blocks, options, phase
-        )
+        if chunk:
+            selected, owner, usable, stats = _chunked_scores(
+                cands, model, chunks_of(sig, torque, chunk), resid, blocks, options, phase
+            )
+        else:
+            selected, owner, usable, stats = _streamed_scores(
+                cands, sig, torque, a, y, resid, blocks, options, phase
+            )
         with phase("twist CV"):
             total, per_fold = fold_gains(stats, _fold_of_block(blocks, folds), options.n_folds)
             gains = list(zip(total.tolist(), per_fold))
@@ -492,12 +586,12 @@ def _discover(train, test, joint, options, progress) -> Solution:
         )
     with phase("test"):
         base_metrics, base_est = _test_errors(model, test_data, joint.rated_torque)
-        base_twist = _twist_rms(model, test_data)
+        base_twist = _twist_rms(model, test_data, chunk=options.chunk)
     say(f"baseline: test torque RMS {base_metrics.rms:.4g} N·m, max {base_metrics.max:.4g} N·m")
     # folds: whole contiguous blocks, no shorter than the residual's correlation length
     with phase("baseline"):
         est_train = estimate(model, data)
-        resid0 = data.twist - design(model, *data.pair()) @ np.asarray(model.coef)
+        resid0 = _residual(model, data, None, options.chunk)
     block, note = cv_block_length(resid0, data.starts, options.n_folds, options.block)
     if note:
         notes.append(note)
@@ -510,7 +604,7 @@ def _discover(train, test, joint, options, progress) -> Solution:
         rng.permutation(np.arange(n_blocks) % options.n_folds) for _ in range(options.n_resamples)
     ]
     with phase("torque CV"):
-        cv = cross_validate(model, data, folds)
+        cv = cross_validate(model, data, folds, chunk=options.chunk)
     base_cv = cv
     say(f"baseline: cross-validated torque RMS {cv.torque_rms:.4g} N·m on TRAIN")
     if not np.isfinite(cv.torque_rms):
@@ -564,10 +658,10 @@ def _discover(train, test, joint, options, progress) -> Solution:
                 try:
                     with phase("calibrate"):
                         new_model, new_est = calibrate(
-                            model.with_effects(cand.term), data, notes, est_train
+                            model.with_effects(cand.term), data, notes, est_train, options.chunk
                         )
                     with phase("torque CV"):
-                        new_cv = cross_validate(new_model, data, folds, cv)
+                        new_cv = cross_validate(new_model, data, folds, cv, options.chunk)
                 except (CalibrationError, InversionError) as err:
                     notes.append(f"candidate {cand.key} could not be added: {err}")
                     continue
@@ -604,7 +698,7 @@ def _discover(train, test, joint, options, progress) -> Solution:
         _, cand, gain, folds_, stab, new_model, new_est, new_cv = best
         with phase("test"):
             metrics, est = _test_errors(new_model, test_data, joint.rated_torque)
-            twist_rms = _twist_rms(new_model, test_data)
+            twist_rms = _twist_rms(new_model, test_data, chunk=options.chunk)
         model, est_train, cv = new_model, new_est, new_cv
         steps.append(
             DiscoveryStep(
@@ -634,11 +728,19 @@ def _discover(train, test, joint, options, progress) -> Solution:
     with phase("intervals"):
         if steps:
             sig_d, torque = data.pair(est_train)
-            a_final = design(model, sig_d, torque)
-            res_final = data.twist - a_final @ np.asarray(model.coef)
-            length = bootstrap_length(block, res_final, data.starts)
-            intervals = effect_intervals(model, a_final, data, est_train, length=length)
-            del a_final
+            if options.chunk:
+                chunks = chunks_of(sig_d, torque, options.chunk)
+                res_final = twist_residual(canonical(model), chunks)
+                length = bootstrap_length(block, res_final, data.starts)
+                intervals = effect_intervals(
+                    model, None, data, est_train, length=length, chunks=chunks
+                )
+            else:
+                a_final = design(model, sig_d, torque)
+                res_final = data.twist - a_final @ np.asarray(model.coef)
+                length = bootstrap_length(block, res_final, data.starts)
+                intervals = effect_intervals(model, a_final, data, est_train, length=length)
+                del a_final
             for s_, iv in zip(steps, intervals):
                 s_.amplitude = iv
     with phase("unexplained"):

@@ -30,7 +30,10 @@ from ..compliance import ComplianceModel, Signals, calibrate_lstsq, signals_from
 from ..compliance._inversion import _estimate
 from ..compliance._lstsq import CSNE_MAX_COND, _design
 from ..compliance._stream import scaled_cho_factor
+from ..compliance._stream_fit import calibrate_chunks
 from ..effects import SEGMENT_START, TORQUE_PATH
+from ._chunked import Chunks
+from ._chunked_fits import ChunkedFoldSolver
 from ._folds import segment_starts
 
 DRIVER_ROUNDS = 3
@@ -206,31 +209,46 @@ def design(model: ComplianceModel, sig, torque) -> np.ndarray:
     return np.asarray(_design(canonical(model), sig, jnp.asarray(torque)))
 
 
+def chunks_of(sig: Signals, torque, chunk: int) -> Chunks:
+    """A record's rows chunk by chunk ([`hdjax.discover._chunked.Chunks`][]), each chunk's
+    design formed as [`design`][] forms the whole record's."""
+    return Chunks(sig, torque, chunk, design)
+
+
 def estimate(model: ComplianceModel, data: PipelineData) -> Float[np.ndarray, " n"]:
     """Torque estimate by inversion (eqs. (26)-(27)); non-finite values where it fails."""
     return np.asarray(_estimate(canonical(model), data.sig).torque)
 
 
-def quiet_calibrate(model, pair, notes, throw=True):
-    """`calibrate_lstsq` with its warnings turned into notes."""
+def quiet_calibrate(model, pair, notes, throw=True, chunk: int = 0):
+    """`calibrate_lstsq` with its warnings turned into notes; with `chunk`, the same fit with
+    the normal equations and the refinement accumulated over chunks of that many samples
+    ([`hdjax.compliance._stream_fit.calibrate_chunks`][], always refined, as in memory)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        res = calibrate_lstsq(model, pair, throw=throw)
+        if chunk:
+            passes = chunks_of(pair[0], pair[1], chunk).compact_passes(model)
+            res = calibrate_chunks(model, passes, label="TRAIN", throw=throw, refine_above=0.0)
+        else:
+            res = calibrate_lstsq(model, pair, throw=throw)
     for w in caught:
         notes.append(str(w.message))
     return res
 
 
-def calibrate(structure: ComplianceModel, data: PipelineData, notes, previous_estimate):
+def calibrate(
+    structure: ComplianceModel, data: PipelineData, notes, previous_estimate, chunk: int = 0
+):
     """Calibrate `structure` on all of `data`; with path terms, driver rounds from
-    `previous_estimate`. **Returns:** (model, its torque estimate on `data`)."""
+    `previous_estimate`; with `chunk`, the fits accumulated chunk by chunk.
+    **Returns:** (model, its torque estimate on `data`)."""
     structure = canonical(structure)
     if not has_path(structure):
-        model = quiet_calibrate(structure, data.pair(), notes).value
+        model = quiet_calibrate(structure, data.pair(), notes, chunk=chunk).value
         return model, estimate(model, data)
     driver = previous_estimate
     for _ in range(DRIVER_ROUNDS):
-        model = quiet_calibrate(structure, data.pair(driver), notes).value
+        model = quiet_calibrate(structure, data.pair(driver), notes, chunk=chunk).value
         why = hysteresis_invertible(model)
         if why:
             raise InversionError(why)
@@ -344,11 +362,13 @@ def cross_validate(
     data: PipelineData,
     folds: list[np.ndarray],
     previous: CrossValidation | None = None,
+    chunk: int = 0,
 ) -> CrossValidation:
     """Cross-validated torque and twist error of `model`'s structure (see the module docstring).
 
     `model` is the structure calibrated on all of TRAIN: its active coefficients and torque
-    range are kept, so every fold model compiles to the same program.
+    range are kept, so every fold model compiles to the same program. With `chunk`, the fold
+    fits are accumulated over chunks of that many samples ([`ChunkedFoldSolver`][]).
     """
     path = has_path(model)
     active = np.asarray(model.active)
@@ -358,32 +378,51 @@ def cross_validate(
     sse_t, sse_w, cnt, per_fold, ests = 0.0, 0.0, 0, [], []
     model = canonical(model)
     torque = jnp.asarray(data.torque)
-    fixed = None if path else design(model, data.sig, torque)
-    fixed_solver = None if path else FoldSolver(fixed, y, active)
+    # the held-out samples scored: those whose reference torque lies inside the range the
+    # fold's training part calibrates (as TEST flags estimates outside the calibrated range);
+    # the mask depends on the data only, so every structure is scored on the same samples
+    fold_id = np.zeros(n, int)
+    scored = []
+    for f, te in enumerate(folds):
+        fold_id[te] = f
+        train_rows = np.ones(n, bool)
+        train_rows[te] = False
+        lo, hi = data.torque[train_rows].min(), data.torque[train_rows].max()
+        scored.append(te[(data.torque[te] >= lo) & (data.torque[te] <= hi)])
+    if chunk:
+        masks = [np.isin(np.arange(n), s_) for s_ in scored]
+        chunked = lambda sig, folds_: ChunkedFoldSolver(
+            model, chunks_of(sig, data.torque, chunk), fold_id, masks, folds_
+        )
+        fixed_solver = None if path else chunked(data.sig, None)
+    else:
+        fixed = None if path else design(model, data.sig, torque)
+        fixed_solver = None if path else FoldSolver(fixed, y, active)
     for f, te in enumerate(folds):
         train_rows = np.ones(n, bool)
         train_rows[te] = False
         driver = previous.estimates[f] if (path and previous is not None) else data.torque * 0.0
         for _ in range(rounds):
-            if fixed is not None:
-                a, solver = fixed, fixed_solver
+            if fixed_solver is not None:
+                solver = fixed_solver
+            elif chunk:
+                solver = chunked(data.with_driver(driver), (f,))
             else:
                 a = np.asarray(_design(model, data.with_driver(driver), torque))
                 solver = FoldSolver(a, y, active)
-            coef = solver.solve(te)
+            coef = solver.solve(te if not chunk else f)
             fold_model = _fold_model(model, coef, data.torque[train_rows])
             est = estimate(fold_model, data)
             driver = np.where(np.isfinite(est), est, 0.0)
-        # score the held-out samples whose reference torque lies inside the range the fold's
-        # training part calibrates (as TEST flags estimates outside the calibrated range); the
-        # mask depends on the data only, so every structure is scored on the same samples
-        lo, hi = data.torque[train_rows].min(), data.torque[train_rows].max()
-        te = te[(data.torque[te] >= lo) & (data.torque[te] <= hi)]
+        te = scored[f]
         e = est[te] - data.torque[te]
-        w = a[te] @ coef - y[te]
+        if chunk:
+            sse_w += solver.twist_sse(f)
+        else:
+            w = solver.a[te] @ coef - y[te]
+            sse_w += float(np.sum(w**2))
         sse = float(np.sum(e**2)) if np.all(np.isfinite(e)) else np.inf
         sse_t += sse
-        sse_w += float(np.sum(w**2))
         cnt += te.size
         per_fold.append(float(np.sqrt(sse / max(te.size, 1))))
         ests.append(est)

@@ -29,12 +29,14 @@ observations", Ann. Statist. 17 (1989) 1217-1241.
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg
 
 from ..compliance import ComplianceModel
 from ..compliance._lstsq import CSNE_MAX_COND
 from ..compliance._stream import scaled_cho_factor
+from ._chunked import Chunks
 from ._folds import correlation_length
-from ._pipeline import PipelineData
+from ._pipeline import PipelineData, canonical
 
 ARCSEC = 180.0 * 3600.0 / np.pi
 N_BOOTSTRAP = 400
@@ -64,19 +66,23 @@ def _local_compliance(model: ComplianceModel, torque: np.ndarray) -> np.ndarray:
 
 def effect_intervals(
     model: ComplianceModel,
-    design: np.ndarray,
+    design: np.ndarray | None,
     data: PipelineData,
     estimate: np.ndarray,
     *,
     length: int,
     n_bootstrap: int = N_BOOTSTRAP,
     seed: int = 0,
+    chunks: Chunks | None = None,
 ) -> list[dict]:
     """Amplitude and 95 % interval of each effect group of `model` (see the module docstring).
 
     **Arguments:** `model` (calibrated on `data`), `design` (its design matrix on `data`, with
     the same hysteresis driver as at calibration), `estimate` (its torque estimate on `data`,
-    where the local compliance is read), `length` (bootstrap block length in samples).
+    where the local compliance is read), `length` (bootstrap block length in samples),
+    `chunks` (instead of `design`: the record with the same driver, whose design rows are
+    formed chunk by chunk for the Gram matrix and the projections,
+    [`partial_out_chunked`][]).
 
     **Returns:** per effect, a dict with `effect`, `arcsec`, `arcsec_ci95`, `nm`, `nm_ci95`,
     `block_samples`.
@@ -84,7 +90,11 @@ def effect_intervals(
     active = np.asarray(model.active)
     y = data.twist
     n = y.size
-    gram = _gram(design, y)
+    if chunks is None:
+        gram = _gram(design, y)
+    else:
+        model = canonical(model)
+        gram = _gram_chunked(model, chunks, y)
     comp = _local_compliance(model, np.asarray(estimate))
     rng = np.random.default_rng(seed)
     length = int(max(1, min(length, n // 4)))
@@ -97,8 +107,11 @@ def effect_intervals(
         sl = np.arange(i, i + m)
         i += m
         others = np.flatnonzero(active & ~np.isin(np.arange(model.n_coef), sl))
-        x = design[:, sl]
-        xp, yp = partial_out(design, y, others, sl, gram)
+        if chunks is None:
+            x = design[:, sl]
+            xp, yp = partial_out(design, y, others, sl, gram)
+        else:
+            x, xp, yp = partial_out_chunked(model, chunks, y, others, sl, gram)
         beta = np.linalg.lstsq(xp, yp, rcond=None)[0]
         peak = np.abs(x).max(axis=0)
         amp = float(_amplitude(term, beta[None, :], peak)[0])
@@ -138,6 +151,73 @@ def _gram(design: np.ndarray, y: np.ndarray) -> np.ndarray:
     return g
 
 
+def _gram_chunked(model, chunks: Chunks, y: np.ndarray) -> np.ndarray:
+    """[`_gram`][] summed over the design's chunks."""
+    g = None
+    for lo, hi, a in chunks.designs(model):
+        part = _gram(a, y[lo:hi])
+        g = part if g is None else g + part
+    return g
+
+
+def partial_out_chunked(model, chunks: Chunks, y, others, cols, gram):
+    """[`partial_out`][] with the design formed chunk by chunk: the same corrected
+    semi-normal equations (the refinement's $A^\top r$ summed over a pass), or above
+    `CSNE_MAX_COND` the QR of those columns folded in chunk by chunk (TSQR).
+
+    **Returns:** `(x, x_perp, y_perp)`: the columns `cols` themselves, `(n, len(cols))`, and
+    as [`partial_out`][] returns them.
+    """
+    n, m = y.size, len(cols)
+    x = np.empty((n, m))
+    t = np.empty((n, m + 1))
+
+    def target(lo, hi, a):
+        return np.concatenate([a[:, cols], y[lo:hi, None]], axis=1)
+
+    if others.size == 0:
+        for lo, hi, a in chunks.designs(model):
+            x[lo:hi] = a[:, cols]
+            t[lo:hi] = target(lo, hi, a)
+        return x, t[:, :-1], t[:, -1]
+    p = gram.shape[0] - 1
+    d = np.sqrt(np.diag(gram)[others])
+    d[d == 0] = 1.0
+    gs = gram[np.ix_(others, others)] / np.outer(d, d)
+    chol = scaled_cho_factor(gs, CSNE_MAX_COND)
+    if chol is None:
+        k = others.size
+        r = np.zeros((0, k + m + 1))
+        for lo, hi, a in chunks.designs(model):
+            block = np.concatenate([a[:, others] / d, target(lo, hi, a)], axis=1)
+            r = np.linalg.qr(np.vstack([r, block]), mode="r")
+        r_full = np.zeros((k + m + 1, k + m + 1))
+        r_full[: r.shape[0]] = r
+        w_o = scipy.linalg.lstsq(r_full[:k, :k], r_full[:k, k:])[0] / d[:, None]
+        for lo, hi, a in chunks.designs(model):
+            x[lo:hi] = a[:, cols]
+            t[lo:hi] = target(lo, hi, a) - a[:, others] @ w_o
+        return x, t[:, :-1], t[:, -1]
+    factor = chol[0]
+    w = np.zeros((p, m + 1))
+    w[others] = (
+        scipy.linalg.cho_solve(
+            factor, gram[np.ix_(others, np.r_[cols, p])] / d[:, None], check_finite=False
+        )
+        / d[:, None]
+    )
+    atr = np.zeros((p, m + 1))
+    for lo, hi, a in chunks.designs(model):
+        atr += a.T @ (target(lo, hi, a) - a @ w)
+    w[others] += (
+        scipy.linalg.cho_solve(factor, atr[others] / d[:, None], check_finite=False) / d[:, None]
+    )
+    for lo, hi, a in chunks.designs(model):
+        x[lo:hi] = a[:, cols]
+        t[lo:hi] = target(lo, hi, a) - a @ w
+    return x, t[:, :-1], t[:, -1]
+
+
 def partial_out(
     design: np.ndarray, y: np.ndarray, others: np.ndarray, cols: np.ndarray, gram: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -149,8 +229,6 @@ def partial_out(
     residual), or, above `CSNE_MAX_COND` or when Cholesky fails, a QR of those columns.
     **Returns:** `(x_perp, y_perp)`, shapes `(n, len(cols))` and `(n,)`.
     """
-    import scipy.linalg
-
     p = design.shape[1]
     target = np.concatenate([design[:, cols], y[:, None]], axis=1)
     if others.size == 0:

@@ -150,16 +150,20 @@ class Hysteresis(AbstractPathTerm):
 
     key, names = labels("hysteresis:torque", "dahl(T/{torque_scale})")
 
+    def dahl_driver(self, sig: Signals, torque: SamplesLike | None = None) -> Samples:
+        """The path the Dahl state follows: a torque path supplied with the signals (the
+        estimate of a previous model, so that calibration sees the state the estimator will
+        see) takes precedence over `torque`."""
+        return sig.extras.get(TORQUE_PATH, torque)
+
     def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
-        # A torque path supplied with the signals (the estimate of a previous model, so that
-        # calibration sees the state the estimator will see) takes precedence.
-        driver = sig.extras.get(TORQUE_PATH, torque)
+        driver = self.dahl_driver(sig, torque)
         return dahl_state(driver, self.torque_scale, sig.extras.get(SEGMENT_START))[:, None]
 
     def numpy_columns(
         self, sig: Signals, torque: SamplesLike | None = None
     ) -> Float[np.ndarray, "n 1"]:
-        driver = sig.extras.get(TORQUE_PATH, torque)
+        driver = self.dahl_driver(sig, torque)
         reset = sig.extras.get(SEGMENT_START)
         reset = None if reset is None else np.asarray(reset)
         return dahl_state_numpy(np.asarray(driver), self.torque_scale, reset)[:, None]
@@ -184,8 +188,12 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
 
     key, names = labels("hysteresis:torque", "dahl(twist/{compliance}/{torque_scale})")
 
+    def dahl_driver(self, sig: Signals, torque: SamplesLike | None = None) -> Samples:
+        """The path the Dahl state follows: the measured twist over the compliance."""
+        return sig.twist / self.compliance
+
     def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
-        driver = sig.twist / self.compliance
+        driver = self.dahl_driver(sig, torque)
         return dahl_state(driver, self.torque_scale, sig.extras.get(SEGMENT_START))[:, None]
 
     def numpy_columns(
@@ -193,7 +201,7 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
     ) -> Float[np.ndarray, "n 1"]:
         reset = sig.extras.get(SEGMENT_START)
         reset = None if reset is None else np.asarray(reset)
-        driver = np.asarray(sig.twist) / self.compliance
+        driver = np.asarray(self.dahl_driver(sig, torque))
         return dahl_state_numpy(driver, self.torque_scale, reset)[:, None]
 
 

@@ -1,0 +1,238 @@
+r"""The residual loop's design chunk by chunk: memory bounded by the chunk, not the record.
+
+With `DiscoverOptions.chunk > 0` no $n \times p$ design (Song et al. eq. (15)) of the whole
+training record is formed. Every least-squares quantity the loop needs is a sum over rows,
+so it is accumulated over chunks of `chunk` samples: the calibration's normal equations and
+refinement ([`hdjax.compliance._stream_fit.calibrate_chunks`][]), the per-fold Gram matrices
+of cross-validation (each row adds to its fold's; folds are unions of contiguous blocks), the
+per-block statistics that score the candidates, and the Gram matrix and projections of the
+amplitude intervals.
+
+The signals themselves (velocities that never cross a gap, the `SEGMENT_START` marker) are
+derived once for the whole record ([`hdjax.discover.pipeline_signals`][]), so a chunk's rows
+of every memoryless column are those of the whole record. A *sequential* column, a Dahl
+hysteresis state (any term with a `dahl_driver`), carries its state and the last driver value
+from the end of one chunk into the next ([`DahlCarry`][]), and restarts at a gap exactly as
+on the whole record: a chunk's columns equal the whole record's rows to rounding.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._custom_types import Float
+from .._errors import ConfigError
+from .._features import Signals
+from ..compliance import ComplianceModel
+from ..compliance._lstsq import _compact_column_list, _design
+from ..effects import SEGMENT_START
+from ..effects._hysteresis import _affine_recurrence
+
+MIN_CHUNK = 16
+
+
+def check_chunk(chunk, where: str = "discover chunk") -> int:
+    """`chunk` as an int: 0 (the whole record at once) or at least `MIN_CHUNK` samples;
+    otherwise a ConfigError that names `where`."""
+    if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)):
+        raise ConfigError(
+            f"{where} must be an integer number of samples (0: the whole record at once), "
+            f"got {chunk!r}"
+        )
+    if chunk != 0 and chunk < MIN_CHUNK:
+        raise ConfigError(
+            f"{where} must be 0 (the whole record at once) or at least {MIN_CHUNK} samples, "
+            f"got {chunk}"
+        )
+    return int(chunk)
+
+
+def chunk_bounds(n: int, chunk: int) -> list[tuple[int, int]]:
+    """`(lo, hi)` of consecutive chunks of `chunk` rows (the last one shorter)."""
+    return [(lo, min(lo + chunk, n)) for lo in range(0, n, chunk)]
+
+
+def _pad(x, rows: int, size: int):
+    """The first `rows` rows of `x`, the last one repeated up to `size` rows (one compiled
+    shape for every chunk; the padding rows are never read)."""
+    x = jnp.asarray(x)
+    return x if rows == size else jnp.concatenate([x, jnp.repeat(x[-1:], size - rows, axis=0)])
+
+
+def slice_signals(sig: Signals, lo: int, hi: int, size: int) -> Signals:
+    """Rows `lo:hi` of every signal, padded to `size` rows."""
+    return jax.tree_util.tree_map(lambda x: _pad(x[lo:hi], hi - lo, size), sig)
+
+
+def sequential(term) -> bool:
+    """Whether a term's column carries a state from sample to sample (a Dahl state)."""
+    return hasattr(term, "dahl_driver")
+
+
+@jax.jit
+def _dahl_scan_from(du, reset, z0):
+    # the scan of hdjax.effects.dahl_state, started from a carried state
+    def _step(z, x):
+        d, rs = x
+        z, d = jnp.where(rs, 0.0, z), jnp.where(rs, 0.0, d)
+        z = jnp.clip(z + d * (1.0 - z * jnp.sign(d)), -1.0, 1.0)
+        return z, z
+
+    return jax.lax.scan(_step, z0, (du, reset))
+
+
+def _dahl_numpy_from(du: np.ndarray, reset: np.ndarray, z0: float) -> np.ndarray:
+    # hdjax.effects.dahl_state_numpy's affine recurrence, entered with the state z0
+    ad = np.abs(du)
+    small = ad < 1.0
+    a = np.where(small, 1.0 - ad, 0.0)
+    b = np.where(small, du, np.sign(du))
+    a[reset], b[reset] = 0.0, 0.0
+    b[0] += a[0] * z0
+    return np.clip(_affine_recurrence(a, b), -1.0, 1.0)
+
+
+class DahlCarry:
+    """The Dahl state of sequential columns carried from chunk to chunk.
+
+    `column(key, term, sig, torque, rows, numpy)` gives rows `:rows` of the term's state over a
+    chunk (`sig`, `torque` the chunk's, possibly padded), started from the state and driver
+    value the previous chunk of the same `key` ended with (at the record's start: state 0 and
+    no step, as [`hdjax.effects.dahl_state`][]); it restarts wherever `SEGMENT_START` is set.
+    `numpy` follows [`hdjax.effects.dahl_state_numpy`][] (candidates' columns), else the
+    compiled scan (the model's design). A new pass over the record needs a new carry.
+    """
+
+    def __init__(self) -> None:
+        self.state: dict = {}
+
+    def column(self, key, term, sig: Signals, torque, rows: int, numpy: bool) -> np.ndarray:
+        driver = np.asarray(term.dahl_driver(sig, torque), np.float64)
+        reset = sig.extras.get(SEGMENT_START)
+        reset = np.zeros(driver.shape, bool) if reset is None else np.asarray(reset) != 0
+        z0, prev = self.state.get(key, (0.0, None))
+        prev = driver[0] if prev is None else prev
+        du = np.diff(driver[:rows], prepend=prev) / term.torque_scale
+        r = reset[:rows]
+        if numpy:
+            z = _dahl_numpy_from(du, r.copy(), z0)
+        else:
+            size = driver.shape[0]
+            pad = size - rows  # zero steps without reset leave the state unchanged
+            _, zs = _dahl_scan_from(
+                jnp.asarray(np.r_[du, np.zeros(pad)]),
+                jnp.asarray(np.r_[r, np.zeros(pad, bool)]),
+                jnp.asarray(z0, jnp.float64),
+            )
+            z = np.asarray(zs)[:rows]
+        self.state[key] = (float(z[-1]), float(driver[rows - 1]))
+        return z
+
+
+def dahl_chunked(
+    term, sig: Signals, torque, chunk: int, *, numpy: bool = False
+) -> Float[np.ndarray, " n"]:
+    """A sequential term's column over a whole record, computed `chunk` samples at a time with
+    the state carried (equals `term.columns(sig, torque)[:, 0]` to rounding)."""
+    n = sig.n_samples
+    carry = DahlCarry()
+    out = []
+    for lo, hi in chunk_bounds(n, chunk):
+        sc = slice_signals(sig, lo, hi, min(chunk, n))
+        tc = None if torque is None else _pad(jnp.asarray(torque)[lo:hi], hi - lo, min(chunk, n))
+        out.append(carry.column(0, term, sc, tc, hi - lo, numpy))
+    return np.concatenate(out)
+
+
+def _sequential_positions(model: ComplianceModel, first: int) -> list[tuple[int, object]]:
+    """`(column, term)` of each sequential effect term, its columns starting at `first`."""
+    out, i = [], first
+    for term in model.effect_terms:
+        m = len(term.names())
+        if sequential(term):
+            if m != 1:
+                raise ConfigError(
+                    f"discover chunk: the sequential term {term.key!r} has {m} columns; only "
+                    "one-column Dahl states are carried across chunks (set chunk = 0)"
+                )
+            out.append((i, term))
+        elif term.torque_kind == "path":
+            raise ConfigError(
+                f"discover chunk: no way to carry the state of the path-dependent term "
+                f"{term.key!r} across chunks; set chunk = 0"
+            )
+        i += m
+    return out
+
+
+def _compiled_design(model: ComplianceModel, sig: Signals, torque) -> np.ndarray:
+    return np.asarray(_design(model, sig, torque))
+
+
+class Chunks:
+    """A record's rows chunk by chunk: signals (with an optional hysteresis driver), reference
+    torque, and the model's design rows with sequential states carried.
+
+    **Arguments:** `sig` (the whole record's signals), `torque` (reference), `chunk` (rows),
+    `design` (`design(model, sig, torque)`, a chunk's design matrix as a NumPy array; default
+    the model's compiled design).
+    """
+
+    def __init__(self, sig: Signals, torque, chunk: int, design=None):
+        self.design = _compiled_design if design is None else design
+        self.sig = sig
+        self.torque = np.asarray(torque, np.float64)
+        self.n = int(self.torque.size)
+        self.chunk = int(chunk)
+        self.size = min(self.chunk, self.n)
+        self.bounds = chunk_bounds(self.n, self.chunk)
+
+    def signals(self) -> Iterator[tuple[int, int, Signals, jax.Array]]:
+        """`(lo, hi, signals, torque)` of each chunk, padded to the chunk length."""
+        torque = jnp.asarray(self.torque)
+        for lo, hi in self.bounds:
+            yield (
+                lo,
+                hi,
+                slice_signals(self.sig, lo, hi, self.size),
+                _pad(torque[lo:hi], hi - lo, self.size),
+            )
+
+    def rows(self, model: ComplianceModel) -> Iterator[tuple]:
+        """`(lo, hi, signals, torque, A)`: each chunk's signals (padded) and the full design's
+        rows `lo:hi` (eq. (15)), `(hi - lo, p)`."""
+        seq = _sequential_positions(model, model.n_coef - model.n_effect)
+        carry = DahlCarry()
+        for lo, hi, sc, tc in self.signals():
+            a = np.array(self.design(model, sc, tc)[: hi - lo])
+            for col, term in seq:
+                a[:, col] = carry.column(col, term, sc, tc, hi - lo, numpy=False)
+            yield lo, hi, sc, tc, a
+
+    def designs(self, model: ComplianceModel) -> Iterator[tuple[int, int, np.ndarray]]:
+        """`(lo, hi, A)`: the full design's rows `lo:hi` (eq. (15)), `(hi - lo, p)`."""
+        for lo, hi, _, _, a in self.rows(model):
+            yield lo, hi, a
+
+    def compact_passes(self, model: ComplianceModel):
+        """A callable that starts a pass over the chunks, as
+        [`hdjax.compliance._stream_fit.calibrate_chunks`][] reads them: `(x, b, torque, seg)`,
+        the compact columns (`q x rows`) with the sequential states carried, the twist, the
+        reference torque and the segment index."""
+        seq = _sequential_positions(model, model.n_segments + model.n_base)
+
+        def passes():
+            carry = DahlCarry()
+            for lo, hi, sc, tc in self.signals():
+                cols, seg = _compact_column_list(model, sc, tc)
+                rows = hi - lo
+                x = np.stack([np.asarray(c)[:rows] for c in cols])
+                for col, term in seq:
+                    x[col] = carry.column(col, term, sc, tc, rows, numpy=False)
+                yield x, np.asarray(sc.twist)[:rows], self.torque[lo:hi], np.asarray(seg)[:rows]
+
+        return passes

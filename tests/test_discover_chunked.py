@@ -1,0 +1,246 @@
+"""The residual loop with `chunk`: every fit accumulated chunk by chunk equals the in-memory one.
+
+The references are the loop's own in-memory computations (whole design, per-fold QR-accurate
+solves), run on the same small records; chunk sizes do not divide the record, a chunk boundary
+falls inside a fold's block and at a gap, and the records have a gap where states restart.
+"""
+
+import numpy as np
+import pytest
+
+import hdjax
+from hdjax import ConfigError
+from hdjax.discover._chunked import check_chunk, dahl_chunked
+from hdjax.discover._folds import contiguous_blocks, fold_assignment
+from hdjax.discover._loop import DiscoverOptions, calibrate_baseline, discover, score_candidates
+from hdjax.discover._pipeline import (
+    calibrate,
+    canonical,
+    chunks_of,
+    cross_validate,
+    design,
+    estimate,
+    pipeline_signals,
+    quiet_calibrate,
+)
+from hdjax.discover._uncertainty import effect_intervals
+from hdjax.effects import Harmonics, Hysteresis, TwistHysteresis
+
+from .discover_data import ARCSEC, JOINT, RATED, synthetic_recording
+
+RTOL = 1e-9
+GAIN_ATOL = 1e-6
+EFFECTS = [("harmonic_m", 2.0, 8 * ARCSEC), ("hysteresis", 6 * ARCSEC, 20.0)]
+
+
+def _with_gap(rec, at: int, width: int):
+    """`rec` without samples `at:at + width`: a gap in time where memory states restart."""
+    keep = np.ones(rec.n_samples, bool)
+    keep[at : at + width] = False
+    return rec.select(keep)
+
+
+@pytest.fixture(scope="module")
+def train():
+    return _with_gap(synthetic_recording(1, EFFECTS, n=6400), 3100, 300)
+
+
+@pytest.fixture(scope="module")
+def test_rec():
+    return synthetic_recording(2, EFFECTS, n=3000)
+
+
+def _rel(a, b) -> float:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+
+def _gain_close(a, b, tol) -> bool:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return bool(np.all(np.abs(a - b) <= tol * np.maximum(1.0, np.abs(b))))
+
+
+def _gram_tolerance(model, data, est) -> float:
+    """The forward error bound of the Gram statistics the twist scores come from: ten times
+    the scaled condition number of the base design's Gram matrix times the unit roundoff."""
+    a = design(model, *data.pair(est))[:, np.asarray(model.active)]
+    g = a.T @ a
+    d = np.sqrt(np.diag(g))
+    return 10.0 * np.linalg.cond(g / np.outer(d, d)) * np.finfo(float).eps / 2
+
+
+@pytest.fixture(scope="module")
+def base(train):
+    notes = []
+    model = calibrate_baseline(train, JOINT, DiscoverOptions(), notes)
+    return model, pipeline_signals(train, model.ratio, model.twist_sign, model.velocity)
+
+
+@pytest.mark.parametrize("chunk", [16, 997, 3100, 3101])
+@pytest.mark.parametrize("numpy", [False, True])
+def test_dahl_state_chunkwise_equals_whole_record(base, chunk, numpy):
+    # 3100 puts a chunk boundary exactly at the gap (sample 3100 starts a segment), 3101 one
+    # sample after it; 16 and 997 do not divide the 6100 samples
+    model, data = base
+    est = estimate(model, data)
+    sig = data.with_driver(est)
+    for term in (
+        Hysteresis(torque_scale=0.05 * RATED),
+        TwistHysteresis(torque_scale=0.02 * RATED, compliance=1.5e-5),
+    ):
+        whole = np.asarray(term.numpy_columns(sig) if numpy else term.columns(sig))[:, 0]
+        chunked = dahl_chunked(term, sig, None, chunk, numpy=numpy)
+        assert np.max(np.abs(chunked - whole)) < 1e-12
+        # the state restarts at the gap, and is carried (not restarted) at other boundaries
+        assert chunked[3100] == 0.0
+        inner = [b for b in range(chunk, data.n, chunk) if b not in (3100, 3101)]
+        if inner:
+            assert np.any(np.abs(whole[np.asarray(inner) - 1]) > 1e-3)
+
+
+def test_chunked_calibration_equals_in_memory(base):
+    model, data = base
+    est = estimate(model, data)
+    structure = canonical(
+        model.with_effects(
+            Hysteresis(torque_scale=0.05 * RATED),
+            Harmonics(signal="theta_m", orders=(2.0,)),
+        )
+    )
+    whole = quiet_calibrate(structure, data.pair(est), [])
+    for chunk in (211, 4000):
+        part = quiet_calibrate(structure, data.pair(est), [], chunk=chunk)
+        assert _rel(part.value.coef, whole.value.coef) < RTOL
+        assert part.value.active == whole.value.active
+        assert part.value.torque_range == whole.value.torque_range
+
+
+@pytest.mark.parametrize("path", [False, True])
+def test_chunked_cross_validation_equals_in_memory(base, path):
+    model, data = base
+    blocks = contiguous_blocks(data.starts, 230)
+    folds = fold_assignment(blocks, 5)
+    term = (
+        Hysteresis(torque_scale=0.05 * RATED)
+        if path
+        else TwistHysteresis(torque_scale=0.02 * RATED, compliance=1.5e-5)
+    )
+    fitted, est = calibrate(model.with_effects(term), data, [], estimate(model, data))
+    whole = cross_validate(fitted, data, folds)
+    # 997: boundaries inside the folds' 230-sample blocks
+    part = cross_validate(fitted, data, folds, chunk=997)
+    assert abs(part.torque_rms / whole.torque_rms - 1) < RTOL
+    assert abs(part.twist_rms_arcsec / whole.twist_rms_arcsec - 1) < RTOL
+    assert _rel(part.fold_torque_rms, whole.fold_torque_rms) < RTOL
+    for a, b in zip(part.estimates, whole.estimates):
+        assert _rel(a, b) < RTOL
+
+
+def test_chunked_candidate_scores_equal_in_memory(base):
+    model, data = base
+    blocks = contiguous_blocks(data.starts, 230)
+    folds = fold_assignment(blocks, 5)
+    rng = np.random.default_rng(0)
+    n_blocks = int(blocks.max()) + 1
+    resamples = [rng.permutation(np.arange(n_blocks) % 5) for _ in range(3)]
+    est = estimate(model, data)
+    out = []
+    for chunk in (0, 1237):
+        opts = DiscoverOptions(chunk=chunk)
+        out.append(
+            score_candidates(
+                model, data, opts, (), folds=folds, blocks=blocks, resamples=resamples, est=est
+            )
+        )
+    (s0, _, r0), (s1, _, r1) = out
+    tol = _gram_tolerance(canonical(model), data, est)
+    assert tol < 1e-4
+    assert len(s0) == len(s1) > 10
+    assert _rel(r1, r0) < RTOL
+    for a, b in zip(s0, s1):
+        assert a[0].key == b[0].key and a[0].term == b[0].term
+        # gains are shares of the twist error (unit scale) from Gram statistics, which carry
+        # their own rounding error, up to the scaled condition number of A^T A (here ~1e10)
+        # times the roundoff (the in-memory pass differs from per-fold QR by ~1e-6 on these
+        # data): two summation orders agree to that bound, not to 1e-9; it is far below any
+        # decision (min_gain 0.05). A fold's gain is relative to its own base error, so a
+        # large one scales the bound.
+        assert _gain_close(a[1], b[1], tol)
+        assert _gain_close(a[2], b[2], tol)
+        assert a[3] == b[3]  # sparse regression's choice
+        assert _gain_close(a[4], b[4], tol)
+
+
+def test_chunked_intervals_equal_in_memory(base):
+    model, data = base
+    fitted, est = calibrate(
+        model.with_effects(
+            Harmonics(signal="theta_m", orders=(2.0,)),
+            TwistHysteresis(torque_scale=0.02 * RATED, compliance=1.5e-5),
+        ),
+        data,
+        [],
+        estimate(model, data),
+    )
+    sig, torque = data.pair(est)
+    whole = effect_intervals(fitted, design(fitted, sig, torque), data, est, length=400)
+    part = effect_intervals(
+        fitted, None, data, est, length=400, chunks=chunks_of(sig, torque, 1237)
+    )
+    assert [w["effect"] for w in whole] == [p["effect"] for p in part]
+    for w, p in zip(whole, part):
+        for key in ("arcsec", "nm"):
+            assert abs(p[key] / w[key] - 1) < RTOL
+        assert _rel(p["arcsec_ci95"], w["arcsec_ci95"]) < RTOL
+
+
+def test_chunked_discover_equals_in_memory(train, test_rec):
+    opts = dict(max_effects=2, n_resamples=5, n_shortlist=2, n_grid_tries=1)
+    whole = discover(train, test_rec, JOINT, DiscoverOptions(**opts))
+    part = discover(train, test_rec, JOINT, DiscoverOptions(chunk=1237, **opts))
+    assert whole.aux.effects == part.aux.effects
+    assert len(whole.aux.effects) == 2
+    assert _rel(part.value.coef, whole.value.coef) < RTOL
+    for key in (
+        "baseline_test_rms",
+        "final_test_rms",
+        "baseline_cv_torque_rms",
+        "final_cv_torque_rms",
+    ):
+        assert abs(part.stats[key] / whole.stats[key] - 1) < RTOL, key
+    for a, b in zip(whole.aux.steps, part.aux.steps):
+        assert _gain_close(a.cv_gain, b.cv_gain, GAIN_ATOL)
+        assert abs(b.cv_torque_rms / a.cv_torque_rms - 1) < RTOL
+        assert abs(b.cv_twist_rms_arcsec / a.cv_twist_rms_arcsec - 1) < RTOL
+        assert abs(b.amplitude["arcsec"] / a.amplitude["arcsec"] - 1) < RTOL
+    assert [r["key"] for r in whole.aux.final_ranking] == [r["key"] for r in part.aux.final_ranking]
+    assert _rel(part.aux.train_residual_final, whole.aux.train_residual_final) < RTOL
+
+
+@pytest.mark.parametrize("bad", [5, -1, 15])
+def test_chunk_is_validated(bad):
+    with pytest.raises(ConfigError, match="chunk must be 0 .* or at least 16 samples"):
+        DiscoverOptions(chunk=bad)
+
+
+@pytest.mark.parametrize("bad", [2.5, "1000", True, None])
+def test_chunk_must_be_an_integer(bad):
+    with pytest.raises(ConfigError, match=r"\[discover\] chunk must be an integer"):
+        check_chunk(bad, "[discover] chunk")
+
+
+def test_cli_rejects_a_short_chunk(tmp_path, capsys):
+    from hdjax.discover._cli import cli_main
+
+    rec = synthetic_recording(3, n=200)
+    train, test = tmp_path / "train.csv", tmp_path / "test.csv"
+    hdjax.save_csv(rec, train)
+    hdjax.save_csv(rec, test)
+    joint = tmp_path / "joint.toml"
+    joint.write_text("[joint]\nratio = 160\nrated_torque = 400\n")
+    argv = ["--train", train, "--test", test, "--joint", joint, "--out", tmp_path / "o"]
+    code = cli_main([str(a) for a in argv] + ["--chunk", "8"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "chunk" in err and "at least 16" in err
+    assert not (tmp_path / "o").exists()
