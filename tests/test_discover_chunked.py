@@ -10,19 +10,10 @@ import pytest
 
 import hdjax
 from hdjax import ConfigError
+from hdjax.discover import _pipeline as pipe
 from hdjax.discover._chunked import check_chunk, dahl_chunked
 from hdjax.discover._folds import contiguous_blocks, fold_assignment
 from hdjax.discover._loop import DiscoverOptions, calibrate_baseline, discover, score_candidates
-from hdjax.discover._pipeline import (
-    calibrate,
-    canonical,
-    chunks_of,
-    cross_validate,
-    design,
-    estimate,
-    pipeline_signals,
-    quiet_calibrate,
-)
 from hdjax.discover._uncertainty import effect_intervals
 from hdjax.effects import Harmonics, Hysteresis, TwistHysteresis
 
@@ -63,7 +54,7 @@ def _gain_close(a, b, tol) -> bool:
 def _gram_tolerance(model, data, est) -> float:
     """The forward error bound of the Gram statistics the twist scores come from: ten times
     the scaled condition number of the base design's Gram matrix times the unit roundoff."""
-    a = design(model, *data.pair(est))[:, np.asarray(model.active)]
+    a = pipe.design(model, *data.pair(est))[:, np.asarray(model.active)]
     g = a.T @ a
     d = np.sqrt(np.diag(g))
     return 10.0 * np.linalg.cond(g / np.outer(d, d)) * np.finfo(float).eps / 2
@@ -73,7 +64,7 @@ def _gram_tolerance(model, data, est) -> float:
 def base(train):
     notes = []
     model = calibrate_baseline(train, JOINT, DiscoverOptions(), notes)
-    return model, pipeline_signals(train, model.ratio, model.twist_sign, model.velocity)
+    return model, pipe.pipeline_signals(train, model.ratio, model.twist_sign, model.velocity)
 
 
 @pytest.mark.parametrize("chunk", [16, 997, 3100, 3101])
@@ -82,7 +73,7 @@ def test_dahl_state_chunkwise_equals_whole_record(base, chunk, numpy):
     # 3100 puts a chunk boundary exactly at the gap (sample 3100 starts a segment), 3101 one
     # sample after it; 16 and 997 do not divide the 6100 samples
     model, data = base
-    est = estimate(model, data)
+    est = pipe.estimate(model, data)
     sig = data.with_driver(est)
     for term in (
         Hysteresis(torque_scale=0.05 * RATED),
@@ -100,16 +91,16 @@ def test_dahl_state_chunkwise_equals_whole_record(base, chunk, numpy):
 
 def test_chunked_calibration_equals_in_memory(base):
     model, data = base
-    est = estimate(model, data)
-    structure = canonical(
+    est = pipe.estimate(model, data)
+    structure = pipe.canonical(
         model.with_effects(
             Hysteresis(torque_scale=0.05 * RATED),
             Harmonics(signal="theta_m", orders=(2.0,)),
         )
     )
-    whole = quiet_calibrate(structure, data.pair(est), [])
+    whole = pipe.quiet_calibrate(structure, data.pair(est), [])
     for chunk in (211, 4000):
-        part = quiet_calibrate(structure, data.pair(est), [], chunk=chunk)
+        part = pipe.quiet_calibrate(structure, data.pair(est), [], chunk=chunk)
         assert _rel(part.value.coef, whole.value.coef) < RTOL
         assert part.value.active == whole.value.active
         assert part.value.torque_range == whole.value.torque_range
@@ -125,10 +116,10 @@ def test_chunked_cross_validation_equals_in_memory(base, path):
         if path
         else TwistHysteresis(torque_scale=0.02 * RATED, compliance=1.5e-5)
     )
-    fitted, est = calibrate(model.with_effects(term), data, [], estimate(model, data))
-    whole = cross_validate(fitted, data, folds)
+    fitted, est = pipe.calibrate(model.with_effects(term), data, [], pipe.estimate(model, data))
+    whole = pipe.cross_validate(fitted, data, folds)
     # 997: boundaries inside the folds' 230-sample blocks
-    part = cross_validate(fitted, data, folds, chunk=997)
+    part = pipe.cross_validate(fitted, data, folds, chunk=997)
     assert abs(part.torque_rms / whole.torque_rms - 1) < RTOL
     assert abs(part.twist_rms_arcsec / whole.twist_rms_arcsec - 1) < RTOL
     assert _rel(part.fold_torque_rms, whole.fold_torque_rms) < RTOL
@@ -143,7 +134,7 @@ def test_chunked_candidate_scores_equal_in_memory(base):
     rng = np.random.default_rng(0)
     n_blocks = int(blocks.max()) + 1
     resamples = [rng.permutation(np.arange(n_blocks) % 5) for _ in range(3)]
-    est = estimate(model, data)
+    est = pipe.estimate(model, data)
     out = []
     for chunk in (0, 1237):
         opts = DiscoverOptions(chunk=chunk)
@@ -153,7 +144,7 @@ def test_chunked_candidate_scores_equal_in_memory(base):
             )
         )
     (s0, _, r0), (s1, _, r1) = out
-    tol = _gram_tolerance(canonical(model), data, est)
+    tol = _gram_tolerance(pipe.canonical(model), data, est)
     assert tol < 1e-4
     assert len(s0) == len(s1) > 10
     assert _rel(r1, r0) < RTOL
@@ -173,19 +164,19 @@ def test_chunked_candidate_scores_equal_in_memory(base):
 
 def test_chunked_intervals_equal_in_memory(base):
     model, data = base
-    fitted, est = calibrate(
+    fitted, est = pipe.calibrate(
         model.with_effects(
             Harmonics(signal="theta_m", orders=(2.0,)),
             TwistHysteresis(torque_scale=0.02 * RATED, compliance=1.5e-5),
         ),
         data,
         [],
-        estimate(model, data),
+        pipe.estimate(model, data),
     )
     sig, torque = data.pair(est)
-    whole = effect_intervals(fitted, design(fitted, sig, torque), data, est, length=400)
+    whole = effect_intervals(fitted, pipe.design(fitted, sig, torque), data, est, length=400)
     part = effect_intervals(
-        fitted, None, data, est, length=400, chunks=chunks_of(sig, torque, 1237)
+        fitted, None, data, est, length=400, chunks=pipe.chunks_of(sig, torque, 1237)
     )
     assert [w["effect"] for w in whole] == [p["effect"] for p in part]
     for w, p in zip(whole, part):
