@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from hdjax.discover import order_spectrum, spectrum_peaks
+from hdjax.discover._library import spectrum_orders, torque_free
 from hdjax.discover._spectrum import order_power, refine_peak
 
 
@@ -105,3 +106,43 @@ def test_grid_spectrum_equals_order_by_order_fit(seed):
     np.testing.assert_allclose(
         order_power(theta, r, pick), _projection_power(theta, r, pick), rtol=1e-9
     )
+
+
+def test_torque_free_removes_a_function_of_the_torque_and_keeps_the_rest():
+    rng = np.random.default_rng(3)
+    n = 5000
+    torque = rng.uniform(-300.0, 300.0, n)
+    bins = np.empty(n, int)
+    bins[np.argsort(torque, kind="stable")] = np.arange(n) * 100 // n  # 100 bins of 50
+    level = rng.standard_normal(100)
+    # a function of the torque, constant on each bin: removed exactly
+    np.testing.assert_allclose(torque_free(level[bins], torque), 0.0, atol=1e-12)
+    # a part with zero mean in every bin: kept exactly
+    rest = rng.standard_normal(n)
+    rest -= (np.bincount(bins, rest) / np.bincount(bins))[bins]
+    np.testing.assert_allclose(torque_free(rest + level[bins], torque), rest, atol=1e-12)
+
+
+def _gravity_swing(n=15000):
+    # the `slow` bench: the link swings pi/2 - 1.4 cos(2 pi t / 20) under weights whose arm
+    # changes at 20 s, so the torque is a function of the output angle at each arm
+    t = np.linspace(0.0, 30.0, n)
+    theta_l = math.pi / 2 - 1.4 * np.cos(2 * math.pi * t / 20.0)
+    arm = np.where(t < 20.0, 0.5, 0.75)
+    return theta_l, -380.0 * arm * np.cos(theta_l)
+
+
+def test_a_function_of_the_torque_is_no_output_order_under_a_gravity_load():
+    theta, torque = _gravity_swing()
+    rng = np.random.default_rng(4)
+    # a compliance misfit that wiggles with the torque (the starting model's segments against
+    # a smooth compliance curve), and sensor noise
+    misfit = 5e-6 * np.sin(2 * math.pi * torque / 60.0) + 1e-6 * rng.standard_normal(theta.size)
+    kw = dict(signal="theta_l", order_range=(0.5, 12.0), named=[], existing=[], n_peaks=3)
+    found, _ = spectrum_orders(theta, misfit, **kw)
+    assert found  # against the angle alone it shows as output orders
+    assert spectrum_orders(theta, misfit, torque=torque, **kw)[0] == []
+    # an output harmonic on top is still found, beside the misfit
+    harmonic = 3e-6 * np.sin(4.6 * theta + 0.5)
+    found, _ = spectrum_orders(theta, misfit + harmonic, torque=torque, **kw)
+    assert [k for k, _ in found if abs(k - 4.6) < 0.1], found

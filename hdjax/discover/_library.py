@@ -23,7 +23,10 @@ the built-in families give these keys (the report's `vocabulary`, [`hdjax.effect
 
 Harmonic orders come from the order spectrum of the residual (peaks, refined), merged with the
 integers and the combination orders $2 \\pm 2/N$; a spectrum peak is searched only where the
-recording covers a full period, a named order as soon as it covers a third of one.
+recording covers a full period, a named order as soon as it covers a third of one. A spectrum
+peak that is a function of the torque along the path rather than of the angle (the starting
+model's compliance misfit under a gravity-like load) is not offered
+(`stands_apart_from_torque`).
 Nonlinear parameters (the smoothing speed $\\omega_s$, the Dahl scale, the backlash width) are
 scanned on a short grid; each grid member is a separate candidate of the same key, and the best
 one wins.
@@ -45,7 +48,14 @@ from ..effects import (
     CandidateContext,
     harmonic_key as harmonic_key,
 )
-from ._spectrum import OrderSpectrum, order_power, order_spectrum, refine_peak, spectrum_peaks
+from ._spectrum import (
+    OrderSpectrum,
+    order_power,
+    order_spectrum,
+    refine_peak,
+    spectrum_peaks,
+    subsample,
+)
 
 FAMILIES = effects.discover_families()
 """The built-in families the loop can offer (registered families: `effects.discover_families()`)."""
@@ -134,6 +144,81 @@ def min_resolvable_order(theta) -> float:
     return math.inf if span <= 0 else 2.0 * math.pi / span
 
 
+TORQUE_BIN_SAMPLES = 50
+"""Samples per torque bin (equal-count bins, at most `MAX_TORQUE_BINS`) of [`torque_free`][]."""
+
+MAX_TORQUE_BINS = 200
+"""Most torque bins of [`torque_free`][]."""
+
+
+def _torque_bins(torque) -> tuple[np.ndarray, np.ndarray] | None:
+    """Equal-count torque bins: `(bin of each sample, samples per bin)`, None if under two."""
+    t = np.asarray(torque, np.float64)
+    n = t.size
+    n_bins = min(MAX_TORQUE_BINS, n // TORQUE_BIN_SAMPLES)
+    if n_bins < 2:
+        return None
+    bins = np.empty(n, np.intp)
+    bins[np.argsort(t, kind="stable")] = np.arange(n) * n_bins // n
+    return bins, np.bincount(bins, minlength=n_bins)
+
+
+def _less_bin_means(x, bins):
+    if bins is None:
+        return x - x.mean()
+    b, counts = bins
+    return x - (np.bincount(b, x, counts.size) / counts)[b]
+
+
+def torque_free(
+    residual: Float[ArrayLike, " n"], torque: Float[ArrayLike, " n"]
+) -> Float[np.ndarray, " n"]:
+    """The residual less its mean at each torque: the part that no function of the torque
+    explains (means over equal-count torque bins of `TORQUE_BIN_SAMPLES` samples, at most
+    `MAX_TORQUE_BINS` bins)."""
+    r = np.asarray(residual, np.float64)
+    return _less_bin_means(r, _torque_bins(torque)) if r.size else r
+
+
+ANGLE_SHARE = 0.5
+"""The least share, of what a genuine harmonic of the same order keeps, that a spectrum peak
+must keep beyond a function of the torque ([`stands_apart_from_torque`][])."""
+
+
+def stands_apart_from_torque(theta, residual, torque, order: float) -> bool:
+    """Whether a spectrum peak of order `order` is a function of the angle, not of the torque.
+
+    Under a gravity-like load the torque is a function of the output angle along the path
+    ($T \\propto \\cos\\theta_l$ at one arm), so the starting model's compliance misfit, a
+    function of the torque, is one of the angle too and shows as order-spectrum peaks that are
+    no kinematic error. Let $h = (\\cos K\\theta, \\sin K\\theta)$ and $\\tilde x$ the part of
+    $x$ that no function of the torque explains ([`torque_free`][]). A harmonic keeps a share
+    $\\rho = \\|\\tilde h\\|^2 / \\|h - \\bar h\\|^2$ of its variance beyond the torque, a
+    property of the path alone (about 1 when the torque does not follow the angle, a few
+    tenths on a gravity swing whose arm changes). The peak stands if the variance that
+    $\\tilde h$ explains in $\\tilde r$ is at least `ANGLE_SHARE` $\\cdot\\rho$ of what $h$
+    explains in $r$ (the Frisch-Waugh-Lovell gain of the harmonic beside a torque function,
+    against its gain alone); a function of the torque keeps almost none. On at most
+    `MAX_SPECTRUM_SAMPLES` evenly spaced samples.
+    """
+    idx = subsample(np.asarray(theta).size)
+    th = np.asarray(theta, np.float64)[idx]
+    r = np.asarray(residual, np.float64)[idx]
+    bins = _torque_bins(np.asarray(torque, np.float64)[idx])
+    h = np.column_stack([np.cos(order * th), np.sin(order * th)])
+    h0 = h - h.mean(axis=0)
+    ht = np.column_stack([_less_bin_means(h[:, j], bins) for j in range(2)])
+    total = float(np.sum(h0 * h0))
+    rho = float(np.sum(ht * ht)) / total if total > 0 else 1.0
+    r0, rt = r - r.mean(), _less_bin_means(r, bins)
+
+    def explained(x, y):
+        beta = np.linalg.lstsq(x, y, rcond=None)[0]
+        return float(np.sum((x @ beta) ** 2))
+
+    return explained(ht, rt) >= ANGLE_SHARE * rho * explained(h0, r0)
+
+
 def spectrum_orders(
     theta,
     residual,
@@ -143,6 +228,7 @@ def spectrum_orders(
     named: list[float],
     existing: list[float],
     n_peaks: int,
+    torque=None,
 ) -> tuple[list[tuple[float, str]], OrderSpectrum | None]:
     """Orders to try for one angle: spectrum peaks (refined) plus the named orders it covers.
 
@@ -153,8 +239,10 @@ def spectrum_orders(
     against the smooth terms (torque polynomial, Coulomb, the compliance of a gravity-like
     load). Orders within half a resolution of one already in the model (`existing`) are left
     out, and so are orders that TRAIN's widest angle gap leaves undetermined
-    ([`bridges_gaps`][]). Returns `[(order, origin)]` (origin `"spectrum"` or `"grid"`) and the
-    spectrum (None when the record resolves no order in the range).
+    ([`bridges_gaps`][]). With `torque` (the reference torque of the same samples), a spectrum
+    peak that is a function of the torque rather than of the angle is left out
+    ([`stands_apart_from_torque`][]). Returns `[(order, origin)]` (origin `"spectrum"` or
+    `"grid"`) and the spectrum (None when the record resolves no order in the range).
     """
     full = min_resolvable_order(theta)
     lowest = max(order_range[0], full)
@@ -177,6 +265,8 @@ def spectrum_orders(
             p_peak, p_named = order_power(theta, residual, [k, m])
             if p_named >= 0.95 * p_peak:
                 k = m
+        if torque is not None and not stands_apart_from_torque(theta, residual, torque, k):
+            continue  # a function of the torque along this path, not of the angle
         orders.append((k, "spectrum"))
     orders += [(k, "grid") for k in named]
     span, gap = float(np.ptp(np.asarray(theta))), widest_gap(theta)
@@ -218,6 +308,7 @@ def build_library(
     options = LibraryOptions() if options is None else options
     spectra: dict[str, OrderSpectrum] = {}
     resid = residual
+    t_ref = np.asarray(torque, np.float64)
 
     def _spectrum_orders(
         signal, order_range, named, existing, n_peaks, *, residual=None, where=None
@@ -234,6 +325,7 @@ def build_library(
             named=named,
             existing=existing,
             n_peaks=n_peaks,
+            torque=t_ref if where is None else t_ref[where],
         )
         if spec is not None and own:
             spectra[signal] = spec
