@@ -55,7 +55,7 @@ SLOW_FILES = {
     "test_discover_loop.py": 35,
     "test_lara8_reference.py": 25,
     "test_plant_simulate.py": 25,
-    "test_fleet.py": 17,
+    "test_fleet.py": 60,
 }
 
 

@@ -82,3 +82,185 @@ def test_fleet_two_workers_one_broken_and_resume(tmp_path, capsys):
     assert [r["seconds"] for r in table2[:7]] == [r["seconds"] for r in table[:7]]  # reused
     marker = json.loads((out / ".hdjax-result").read_text())
     assert marker["command"] == "fleet" and "results.parquet" in marker["files"]
+
+
+# -- calibrate+discover and estimate on a Dask cluster given by --scheduler ----------------------
+# One 2-worker cluster for the tests below, started by the test as a user would start theirs.
+
+
+@pytest.fixture(scope="module")
+def scheduler():
+    import os
+
+    from distributed import Client, LocalCluster
+
+    from hdjax.cli._fleet import WORKER_ENV
+
+    cluster = LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, env=WORKER_ENV
+    )
+    with Client(cluster) as client:
+        pids = set(client.run(os.getpid).values())
+    yield cluster.scheduler_address, pids
+    cluster.close()
+
+
+def _manifest(tmp_path, task, joints, extra=""):
+    """A manifest of `joints`: name -> (ratio, rated torque, [(log path, date)], model file)."""
+    lines = [f'[fleet]\nname = "cell"\ntask = "{task}"\n{extra}']
+    for name, (ratio, rated, logs, model) in joints.items():
+        entries = ", ".join(f'{{ path = "{p}", date = {d} }}' for p, d in logs)
+        lines.append(
+            f'[[joints]]\nname = "{name}"\nratio = {ratio}\nrated_torque = {rated}\n'
+            + (f'model = "{model}"\n' if model else "")
+            + f"logs = [{entries}]\n"
+        )
+    path = tmp_path / "cell.toml"
+    path.write_text("\n".join(lines))
+    return path
+
+
+def test_fleet_discover_on_a_scheduler_reports_each_amplitude_with_its_interval(
+    tmp_path, scheduler, capsys
+):
+    from .discover_data import ARCSEC, JOINT, synthetic_recording
+
+    address, pids = scheduler
+    # one undeclared effect, a twice-per-motor-turn harmonic, drifting from 20 to 30 arcsec
+    truth = {"2026-01-05": 20.0, "2026-02-02": 30.0}
+    logs = []
+    for k, (date, amp) in enumerate(truth.items()):
+        rec = synthetic_recording(40 + k, [("harmonic_m", 2.0, amp * ARCSEC)], n=4000)
+        hdjax.save_csv(rec, tmp_path / f"j-{date}.csv")
+        logs.append((f"j-{date}.csv", date))
+    joints = {"j": (JOINT.ratio, JOINT.rated_torque, logs, None)}
+    manifest = _manifest(tmp_path, "calibrate+discover", joints, "max_effects = 1\n")
+    out = tmp_path / "out"
+    code = main(["fleet", str(manifest), "--out", str(out), "--scheduler", address, "-q"])
+    assert code == 0, capsys.readouterr().err
+    table = pq.read_table(out / "results.parquet").to_pylist()
+    assert [r["date"] for r in table] == list(truth)
+    for row in table:
+        assert row["status"] == "ok" and row["worker_pid"] in pids  # ran on that cluster
+        assert row["effects"] == ["harmonic:theta_m:2"]
+        assert row["test_rms_Nm"] < 0.5 * row["baseline_test_rms_Nm"]
+        (a,) = row["amplitudes"]
+        assert a["effect"] == "harmonic:theta_m:2"
+        values = [a[c] for c in ("amplitude_arcsec", "low", "high", "amplitude_Nm", "low_Nm",
+                                 "high_Nm")]  # fmt: skip
+        assert all(v is not None and np.isfinite(v) for v in values), a
+        assert a["low"] <= a["amplitude_arcsec"] <= a["high"]
+        assert a["low_Nm"] <= a["amplitude_Nm"] <= a["high_Nm"]
+        assert a["low"] < a["high"] and a["low_Nm"] < a["high_Nm"]
+        # the amplitude is the harmonic's simulated one (closed form), to 5 %
+        np.testing.assert_allclose(a["amplitude_arcsec"], truth[row["date"]], rtol=0.05)
+        # N·m of equivalent torque: the twist over a compliance between the segments' extremes
+        # (the active ones: a compliance the fit leaves out has a null column)
+        k = [row[f"coef:k{j}"] for j in range(1, 6) if row[f"coef:k{j}"] is not None]
+        assert len(k) >= 3
+        rad = a["amplitude_arcsec"] * ARCSEC
+        assert rad / max(k) <= a["amplitude_Nm"] <= rad / min(k)
+        assert a["cv_gain"] > 0
+    from .helpers import assert_figure
+
+    assert_figure(out / "figures" / "drift_j.png", (825, 880))
+    assert "harmonic:theta_m:2" in (out / "report.md").read_text()
+
+
+def test_fleet_estimate_applies_the_saved_model_to_each_log(tmp_path, scheduler, capsys):
+    from hdjax._metrics import error_metrics
+    from hdjax.compliance import estimate_torque
+    from hdjax.config import save_model
+
+    address, pids = scheduler
+    joint = hdjax.Joint(ratio=160.0, rated_torque=400.0)
+    recs = {d: synthetic_recording(joint, 1500, seed=60 + k) for k, d in enumerate(DATES[:3])}
+    for d, rec in recs.items():
+        hdjax.save_csv(rec, tmp_path / f"{d}.csv")
+    calib = recs[DATES[0]]
+    scale = float(np.max(np.abs(np.asarray(calib.current))))
+    # a structure 1500 samples determine well (the per-segment sextic would extrapolate)
+    model = ComplianceModel.paper(
+        joint, poly_order=3, per_segment=False, fourier_order=1, current_scale=scale
+    )
+    model = calibrate_lstsq(model, calib).value
+    save_model(tmp_path / "model.json", joint, compliance=model)
+    logs = [(f"{d}.csv", d) for d in DATES[1:3]]
+    joints = {
+        "r1-j1": (160.0, 400.0, logs, "model.json"),
+        # the same model for a joint of another ratio: refused, in that task's row only
+        "r1-j2": (100.0, 150.0, logs[:1], "model.json"),
+    }
+    manifest = _manifest(tmp_path, "estimate", joints)
+    out = tmp_path / "out"
+    code = main(["fleet", str(manifest), "--out", str(out), "--scheduler", address, "-q"])
+    err = capsys.readouterr().err
+    assert code == 1
+    table = pq.read_table(out / "results.parquet").to_pylist()
+    assert [(r["joint"], r["status"]) for r in table] == [
+        ("r1-j1", "ok"), ("r1-j1", "ok"), ("r1-j2", "failed")
+    ]  # fmt: skip
+    bad = table[2]
+    assert "calibrated for ratio 160" in bad["error"] and "\n" not in bad["error"]
+    assert bad["error"] in err
+    for row in table[:2]:
+        assert row["worker_pid"] in pids and row["n_samples"] == 1500
+        rec = recs[row["date"]]
+        est = estimate_torque(model, rec)
+        ref = error_metrics(np.asarray(est.torque), np.asarray(rec.torque), joint.rated_torque)
+        np.testing.assert_allclose(row["test_rms_Nm"], float(ref.rms), rtol=1e-9)
+        np.testing.assert_allclose(row["test_max_Nm"], float(ref.max), rtol=1e-9)
+        np.testing.assert_allclose(
+            row["in_range_pct"], 100 * np.mean(np.asarray(est.in_range)), rtol=1e-12
+        )
+        assert row["test_rms_Nm"] < 0.01 * joint.rated_torque  # the model fits these logs
+        for name, value in zip(model.term_names, np.asarray(model.coef)):
+            np.testing.assert_allclose(row[f"coef:{name}"], value, rtol=1e-12, atol=1e-300)
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _one_line(capsys, *words):
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "Traceback" not in err, err
+    assert err.startswith("hdjax: error:"), err
+    for w in words:
+        assert w in err, err
+    return err
+
+
+def test_fleet_bad_scheduler_is_one_line_and_quick(tmp_path, capsys):
+    import time
+
+    rec = synthetic_recording(hdjax.Joint(ratio=160.0, rated_torque=400.0), 200, seed=1)
+    hdjax.save_csv(rec, tmp_path / "a.csv")
+    joints = {"j": (160.0, 400.0, [("a.csv", DATES[0])], None)}
+    manifest = str(_manifest(tmp_path, "calibrate", joints))
+    out = tmp_path / "out"
+    run = lambda *a: main(["fleet", manifest, "--out", str(out), *a])  # noqa: E731
+    nobody = f"tcp://127.0.0.1:{_free_port()}"
+    t0 = time.perf_counter()
+    assert run("--scheduler", nobody, "--connect-timeout", "1") == 2
+    assert time.perf_counter() - t0 < 10  # the 1 s timeout, not the 20 s default
+    _one_line(capsys, nobody, "cannot connect", "--connect-timeout")
+    assert not out.exists()
+    for address in ("nonsense", "127.0.0.1", "foo://127.0.0.1:8786"):
+        assert run("--scheduler", address) == 2
+        _one_line(capsys, repr(address), "not a scheduler address", "tcp://HOST:PORT")
+    assert run("--scheduler", " ") == 2
+    _one_line(capsys, "--scheduler is empty")
+    assert run("--scheduler", nobody, "--workers", "2") == 2
+    _one_line(capsys, "--workers", "drop")
+    assert run("--workers", "0") == 2
+    _one_line(capsys, "--workers must be >= 1, got 0")
+    assert run("--scheduler", nobody, "--connect-timeout", "0") == 2
+    _one_line(capsys, "--connect-timeout must be a positive number")
+    assert run("--connect-timeout", "5") == 2
+    _one_line(capsys, "--connect-timeout applies to --scheduler only")
+    assert not out.exists()

@@ -21,6 +21,7 @@ example:
   hdjax fleet cell.toml --out runs/cell
   hdjax fleet cell.toml --out runs/cell --workers 4
   hdjax fleet cell.toml --out runs/cell --scheduler tcp://10.0.0.5:8786
+  hdjax fleet cell.toml --out runs/cell --scheduler tcp://10.0.0.5:8786 --connect-timeout 5
 
 Each (joint, log) pair is one task on a Dask cluster: by default a local cluster with one
 single-threaded worker process per core, each bound to its own core (--no-pin: not bound), or
@@ -42,11 +43,25 @@ WORKER_ENV = {
 }
 
 
+CONNECT_TIMEOUT = 20.0
+"""Seconds `--scheduler` is tried before the command gives up (`--connect-timeout`)."""
+
+
 def add_parser(sub) -> None:
     p = add_command(sub, "fleet", HELP, EXAMPLE)
     p.add_argument("manifest", help="the fleet manifest (TOML: [fleet], [model], [[joints]])")
     p.add_argument("--out", required=True, help="the result folder")
-    p.add_argument("--scheduler", help="address of a running Dask scheduler (default: local)")
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="address of a running Dask scheduler, tcp://HOST:PORT (default: a local cluster)",
+    )
+    p.add_argument(
+        "--connect-timeout",
+        type=float,
+        metavar="SECONDS",
+        help=f"how long to try to reach --scheduler (default {CONNECT_TIMEOUT:g} s)",
+    )
     p.add_argument(
         "--workers", type=int, help="worker processes of the local cluster (default: one per core)"
     )
@@ -94,16 +109,22 @@ def _client(args, n_tasks: int):
     Client, LocalCluster = distributed.Client, distributed.LocalCluster
 
     if args.scheduler:
+        timeout = args.connect_timeout or CONNECT_TIMEOUT
         try:
-            return Client(args.scheduler, timeout="20s"), None
+            return Client(args.scheduler, timeout=f"{timeout}s"), None
+        except ValueError as err:  # not an address: no scheme, no port, an unknown scheme
+            raise ConfigError(
+                f"--scheduler {args.scheduler!r} is not a scheduler address "
+                f"({' '.join(str(err).split())}); give it as tcp://HOST:PORT, e.g. "
+                "tcp://10.0.0.5:8786"
+            ) from None
         except (OSError, TimeoutError) as err:
             raise ConfigError(
                 f"--scheduler {args.scheduler}: cannot connect ({' '.join(str(err).split())}); "
-                "check the address and that the scheduler is running"
+                "check the address and that the scheduler is running, raise --connect-timeout, "
+                "or leave --scheduler out for a local cluster"
             ) from None
     n = args.workers or os.cpu_count() or 1
-    if n < 1:
-        raise ConfigError(f"--workers must be >= 1, got {n}")
     cluster = LocalCluster(
         n_workers=min(n, max(1, n_tasks)),
         threads_per_worker=1,
@@ -155,9 +176,32 @@ def _cached(folder: Path, task_id: str) -> dict | None:
     return row if row.get("status") == "ok" and row.get("task_id") == task_id else None
 
 
+def _check_cluster_options(args) -> None:
+    """Refuse cluster options that contradict each other or make no sense."""
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {args.workers}")
+    if args.scheduler is not None:
+        if not args.scheduler.strip():
+            raise ConfigError("--scheduler is empty; give the address as tcp://HOST:PORT")
+        if args.workers is not None:
+            raise ConfigError(
+                "--workers sets the size of the local cluster; with --scheduler the cluster's "
+                "own workers run the tasks: drop --workers (or --scheduler)"
+            )
+    if args.connect_timeout is not None:
+        if args.scheduler is None:
+            raise ConfigError("--connect-timeout applies to --scheduler only; drop it")
+        if not args.connect_timeout > 0 or args.connect_timeout == float("inf"):
+            raise ConfigError(
+                f"--connect-timeout must be a positive number of seconds, got "
+                f"{args.connect_timeout:g}"
+            )
+
+
 def command(args, parser) -> int:
     import jax
 
+    _check_cluster_options(args)
     man = load_manifest(args.manifest)
     out = Path(args.out)
     inputs = [man.path] + [Path(t.log) for t in man.tasks]

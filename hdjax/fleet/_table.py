@@ -39,6 +39,9 @@ def _schema(coef_names):
             ("amplitude_arcsec", pa.float64()),
             ("low", pa.float64()),
             ("high", pa.float64()),
+            ("amplitude_Nm", pa.float64()),
+            ("low_Nm", pa.float64()),
+            ("high_Nm", pa.float64()),
             ("cv_gain", pa.float64()),
         ]
     )
@@ -90,7 +93,7 @@ def _date(s: str):
 def drift_figure(joint: str, rows: list[dict]) -> bytes:
     """How one joint's calibration moves over its logs' dates: the stiffness of each torque
     segment ($1/k_j$, Song et al. eq. (7)), the amplitude of each effect the residual loop
-    added (with its interval when given), and the errors. Failed tasks are left out."""
+    added (with its 95 % interval), and the errors. Failed tasks are left out."""
     ok = sorted(
         (r for r in rows if r.get("status") == "ok" and _date(r["date"])),
         key=lambda r: r["date"],
@@ -112,13 +115,15 @@ def drift_figure(joint: str, rows: list[dict]) -> bytes:
         xs, ys, lo, hi = [], [], [], []
         for d, r in zip(dates, ok):
             for a in r.get("amplitudes") or []:
-                if a["effect"] == e and a.get("amplitude_arcsec") is not None:
+                amp = a.get("amplitude_arcsec")
+                if a["effect"] == e and amp is not None:
                     xs.append(d)
-                    ys.append(a["amplitude_arcsec"])
-                    lo.append(a["amplitude_arcsec"] - (a.get("low") or a["amplitude_arcsec"]))
-                    hi.append((a.get("high") or a["amplitude_arcsec"]) - a["amplitude_arcsec"])
+                    ys.append(amp)
+                    low, high = a.get("low"), a.get("high")
+                    lo.append(0.0 if low is None else max(0.0, amp - low))
+                    hi.append(0.0 if high is None else max(0.0, high - amp))
         axes[1].errorbar(xs, ys, yerr=[lo, hi], fmt="s-", capsize=3, label=e)
-    axes[1].set_ylabel("effect amplitude [arcsec RMS]")
+    axes[1].set_ylabel("effect amplitude [arcsec]")
     if effects:
         axes[1].legend(fontsize=7)
     else:

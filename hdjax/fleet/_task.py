@@ -23,7 +23,6 @@ from ..compliance import (
     calibrate_lstsq,
     calibrate_stream,
     estimate_torque,
-    signals_from_recording,
 )
 from ..compliance._stream_fit import peak_abs
 from ..config import check_compatible, load_model
@@ -50,8 +49,9 @@ def run_task(spec: dict, cache_dir: str | None = None) -> dict:
     **Returns:** the task's row: `joint`, `log`, `date`, `task`, `status` (`"ok"` or
     `"failed"`), `error`, `seconds`, `n_samples`, the calibrated `coefficients` (term name to
     value), `twist_rms_arcsec`, `condition`, and for discover the `effects` added, their
-    `amplitudes` (twist RMS of each effect on the training part [arcsec], with an interval
-    when the residual loop gives one) and the TEST torque errors before and after.
+    `amplitudes` (each effect's amplitude in arcsec of twist and in N·m of equivalent torque,
+    each with its 95 % interval, as the residual loop reports them) and the TEST torque errors
+    before and after.
     """
     if cache_dir and not _CACHE_SET:
         enable_compilation_cache(cache_dir)
@@ -109,29 +109,31 @@ def _calibrate(spec) -> dict:
     }
 
 
-def _effect_amplitudes(solution, train) -> list[dict]:
-    """Each added effect's twist contribution on TRAIN (RMS, arcsec), from the final model."""
+def _pair(interval) -> tuple[float | None, float | None]:
+    if interval is None:
+        return None, None
+    return float(interval[0]), float(interval[1])
 
-    model = solution.value
-    sig = signals_from_recording(train, model.ratio, model.twist_sign, velocity=model.velocity)
-    coef = np.asarray(model.coef)
-    i = model.n_coef - model.n_effect
-    by_key = {}
-    for term in model.effect_terms:
-        m = len(term.names())
-        cols = np.asarray(term.columns(sig, train.torque))
-        by_key[term.key] = float(np.std(cols @ coef[i : i + m])) * ARCSEC
-        i += m
+
+def _effect_amplitudes(steps) -> list[dict]:
+    """Each added effect's amplitude with its 95 % interval, as the residual loop reports it
+    (the `amplitude` of each step of `hdjax discover`'s report: a moving-block bootstrap over
+    TRAIN): in arcsec of twist (`amplitude_arcsec`, `low`, `high`) and in N·m of equivalent torque
+    (`amplitude_Nm`, `low_Nm`, `high_Nm`); `None` where the loop gave none."""
     out = []
-    for step in solution.aux.steps:
-        interval = getattr(step, "interval", None)
-        lo, hi = (None, None) if interval is None else (float(interval[0]), float(interval[1]))
+    for step in steps:
+        amp = step.amplitude or {}
+        lo, hi = _pair(amp.get("arcsec_ci95"))
+        lo_nm, hi_nm = _pair(amp.get("nm_ci95"))
         out.append(
             {
                 "effect": step.key,
-                "amplitude_arcsec": by_key.get(step.key),
+                "amplitude_arcsec": None if amp.get("arcsec") is None else float(amp["arcsec"]),
                 "low": lo,
                 "high": hi,
+                "amplitude_Nm": None if amp.get("nm") is None else float(amp["nm"]),
+                "low_Nm": lo_nm,
+                "high_Nm": hi_nm,
                 "cv_gain": float(step.cv_gain),
             }
         )
@@ -160,7 +162,7 @@ def _calibrate_discover(spec) -> dict:
         "coefficients": _coefficients(sol.value),
         "twist_rms_arcsec": float(twist),
         "effects": list(result.effects),
-        "amplitudes": _effect_amplitudes(sol, train),
+        "amplitudes": _effect_amplitudes(result.steps),
         "baseline_test_rms_Nm": float(result.baseline.rms),
         "test_rms_Nm": float(result.final.rms),
         "test_max_Nm": float(result.final.max),
