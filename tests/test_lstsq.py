@@ -10,12 +10,18 @@ import pytest
 
 import hdjax
 from hdjax.compliance import (
+    ColumnTimesTorque,
     ComplianceModel,
+    Coulomb,
+    Harmonics,
+    Hysteresis,
     _lstsq as lstsq_mod,
     calibrate_lstsq,
     calibration_messages,
 )
-from tests.helpers import JOINT, make_signals, numpy_design, simulate
+from hdjax.compliance._lstsq import _base_column_list, _compact_column_list, _term_columns
+from hdjax.effects import TORQUE_PATH, Backlash
+from tests.helpers import JOINT, make_signals, numpy_design, sim_recording, simulate
 
 CASES = {
     "per_segment": dict(per_segment=True, seed=1),
@@ -180,11 +186,41 @@ def test_recording_without_torque_is_refused():
 
 
 def test_no_recompilation_on_second_call(exact_case):
-    from hdjax.compliance._lstsq import _compact_column_list
-
     c = exact_case
     calibrate_lstsq(c.model, (c.sig, c.torque))
-    before = _compact_column_list._cached._cache_size()
+    before = [f._cached._cache_size() for f in (_base_column_list, _term_columns)]
     with warnings.catch_warnings():
         calibrate_lstsq(c.model, (c.sig, c.torque))
-    assert _compact_column_list._cached._cache_size() == before
+    assert [f._cached._cache_size() for f in (_base_column_list, _term_columns)] == before
+
+
+def test_compact_columns_equal_a_single_program_bit_for_bit():
+    """The calibration's columns, from a program per base-term set and per effect group with
+    the hinges in NumPy, are the numbers one program for the whole structure gives."""
+
+    @eqx.filter_jit
+    def single(model, sig, torque):
+        cols = [jnp.clip(torque, lo, hi) - min(max(0.0, lo), hi) for lo, hi in model.segment_bounds]
+        cols += model.base_column_list(sig)
+        for term in model.effect_terms:
+            block = term.columns(sig, torque)
+            cols += [block[:, j] for j in range(block.shape[1])]
+        return cols, model.segment_index(torque)
+
+    rec = sim_recording(400)
+    model = ComplianceModel.paper(JOINT).with_effects(
+        Harmonics(signal="theta_m", orders=(2.0, 3.0)),
+        Coulomb(signal="omega_l", omega_s=0.05),
+        ColumnTimesTorque(name="current", center=0.0, scale=5.0, torque_scale=100.0),
+        Backlash(width=5.0),
+        Hysteresis(torque_scale=20.0),
+    )
+    sig = hdjax.compliance.signals_from_recording(rec, model.ratio, model.twist_sign)
+    torque = jnp.asarray(rec.torque)
+    sig = eqx.tree_at(lambda s: s.extras, sig, {**sig.extras, TORQUE_PATH: 0.9 * torque})
+    cols, seg = _compact_column_list(model, sig, torque)
+    ref_cols, ref_seg = single(model, sig, torque)
+    assert len(cols) == len(ref_cols) == model.n_segments + model.n_base + model.n_effect
+    for got, ref in zip(cols, ref_cols):
+        np.testing.assert_array_equal(got, np.asarray(ref))
+    np.testing.assert_array_equal(seg, np.asarray(ref_seg))

@@ -171,16 +171,31 @@ def _split_effects(model: ComplianceModel):
     return out
 
 
-def _estimate_impl(model: ComplianceModel, sig: Signals):
+def _effect_parts(model: ComplianceModel, sig: Signals):
+    """Eq. (26)'s twist minus the torque-free effect groups, and the torque gain of the groups
+    linear in torque (`None` without any)."""
     effects = _split_effects(model)
-    # eq. (26): twist minus the torque-free terms
     r = sig.twist
     for term, c in effects["none"]:
         r = r - term.columns(sig, None) @ c
-    hs = _base_h(model, sig)
     g = None
     for term, c in effects["linear"]:
         g = term.torque_gain(sig, c) if g is None else g + term.torque_gain(sig, c)
+    return r, g
+
+
+def _estimate_impl(model: ComplianceModel, sig: Signals):
+    r, g = _effect_parts(model, sig)
+    return _invert(model, sig, r, g)
+
+
+def _invert(model: ComplianceModel, sig: Signals, r, g):
+    """Eqs. (26)-(27) from the twist `r` less the torque-free effect groups and the linear
+    groups' torque gain `g` ([`_effect_parts`][]); `model`'s torque-free and linear effect
+    groups are not read again (the residual loop passes a model without them, so that one
+    compiled inversion serves every structure that differs only in those groups)."""
+    effects = _split_effects(model)
+    hs = _base_h(model, sig)
 
     def solve(r_eff):
         t, seg, amb, unres = _piecewise(model, r_eff, hs, g)

@@ -45,7 +45,8 @@ from .._errors import CalibrationError, DataError, InversionError
 from .._features import signals
 from .._recording import Recording
 from .._solution import RESULTS, Solution
-from ._model import ComplianceModel
+from ..effects import TORQUE_PATH
+from ._model import ComplianceModel, base_term_columns
 from ._signals import Signals
 from ._stream import scaled_cholesky
 
@@ -103,18 +104,53 @@ def _scaled_qr(A, b, active):
 
 
 @eqx.filter_jit
-def _compact_column_list(model: ComplianceModel, sig: Signals, torque):
-    """Hinge, base and effect columns as separate 1-D arrays, and each row's segment.
+def _base_column_list(terms: tuple, sig: Signals) -> list:
+    """The base terms' columns as separate 1-D arrays (one program per set of base terms).
 
     Separate outputs, not one stacked matrix: XLA on CPU concatenates columns slowly (measured
     10x slower than computing them), so the stacking is left to NumPy.
     """
-    cols = [jnp.clip(torque, lo, hi) - min(max(0.0, lo), hi) for lo, hi in model.segment_bounds]
-    cols += model.base_column_list(sig)
+    return base_term_columns(terms, sig)
+
+
+@eqx.filter_jit
+def _term_columns(term, sig: Signals, torque) -> Float[jax.Array, "n k"]:
+    """One effect group's columns (one program per group)."""
+    return term.columns(sig, torque)
+
+
+def term_signals(sig: Signals) -> Signals:
+    """`sig` without the torque path (`TORQUE_PATH`), for the terms that do not read it: the
+    same signals then give the same compiled program whichever driver the caller attached."""
+    if TORQUE_PATH not in sig.extras:
+        return sig
+    extras = {k: v for k, v in sig.extras.items() if k != TORQUE_PATH}
+    return eqx.tree_at(lambda s: s.extras, sig, extras)
+
+
+def _compact_column_list(model: ComplianceModel, sig: Signals, torque):
+    """Hinge, base and effect columns as separate 1-D arrays, and each row's segment.
+
+    The hinges and segments in NumPy (exact), the base terms in one compiled program and each
+    effect group in its own ([`_term_columns`][]): a structure made of groups already seen
+    (the residual loop tries dozens) traces, lowers and loads nothing new, where a program per
+    structure would. The numbers equal those of a single program, bit for bit (tested).
+    """
+    t = np.asarray(torque, np.float64)
+    cols = [np.clip(t, lo, hi) - min(max(0.0, lo), hi) for lo, hi in model.segment_bounds]
+    plain = term_signals(sig)
+    if model.base_terms:
+        cols += [np.asarray(c) for c in _base_column_list(model.base_terms, plain)]
+    torque = jnp.asarray(t)
     for term in model.effect_terms:
-        block = term.columns(sig, torque)
+        block = np.asarray(
+            _term_columns(term, sig if term.torque_kind == "path" else plain, torque)
+        )
         cols += [block[:, j] for j in range(block.shape[1])]
-    return cols, model.segment_index(torque)
+    seg = np.zeros(t.shape, np.int32)
+    for knot in model.knots:  # as `ComplianceModel.segment_index`: knots at or below
+        seg += t >= knot
+    return cols, seg
 
 
 def _compact_index(model: ComplianceModel) -> list[np.ndarray]:

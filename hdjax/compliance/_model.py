@@ -320,14 +320,7 @@ class ComplianceModel(eqx.Module):
 
     def base_column_list(self, sig: Signals) -> list:
         """The base terms' columns as separate 1-D arrays (XLA fuses them; no stacking)."""
-        cols = []
-        for term in self.base_terms:
-            if hasattr(term, "column_list"):
-                cols += term.column_list(sig)
-            else:
-                block = term.columns(sig)
-                cols += [block[:, j] for j in range(block.shape[1])]
-        return cols
+        return base_term_columns(self.base_terms, sig)
 
     def base_columns(self, sig: Signals) -> Float[Array, "n n_base"]:
         """Columns of the base terms (shared layout, before per-segment expansion)."""
@@ -403,6 +396,19 @@ class ComplianceModel(eqx.Module):
             active=tuple(bool(a) for a in d["active"]),
             velocity=str(d["velocity"]),
         )
+
+
+def base_term_columns(terms: tuple, sig: Signals) -> list:
+    """The columns of base terms `terms` (the torque-free part $h$ of eq. (10)) as separate
+    1-D arrays, in order."""
+    cols = []
+    for term in terms:
+        if hasattr(term, "column_list"):
+            cols += term.column_list(sig)
+        else:
+            block = term.columns(sig)
+            cols += [block[:, j] for j in range(block.shape[1])]
+    return cols
 
 
 def _check_int(name: str, value, minimum: int) -> None:

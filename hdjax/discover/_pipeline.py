@@ -27,8 +27,9 @@ from .._custom_types import Array, ArrayLike, Bool, Float
 from .._errors import InversionError
 from .._recording import Recording
 from ..compliance import ComplianceModel, Signals, calibrate_lstsq, signals_from_recording
-from ..compliance._inversion import _estimate
-from ..compliance._lstsq import CSNE_MAX_COND, _design
+from ..compliance._inversion import _invert, _split_effects
+from ..compliance._lstsq import CSNE_MAX_COND, _design, _term_columns, term_signals
+from ..compliance._model import base_term_columns
 from ..compliance._stream import scaled_cho_factor
 from ..compliance._stream_fit import calibrate_chunks
 from ..effects import SEGMENT_START, TORQUE_PATH
@@ -146,19 +147,8 @@ def canonical(model: ComplianceModel) -> ComplianceModel:
 
 @eqx.filter_jit
 def _base_columns(terms: tuple, sig: Signals) -> Float[Array, "n n_base"]:
-    cols = []
-    for term in terms:
-        if hasattr(term, "column_list"):
-            cols += term.column_list(sig)
-        else:
-            block = term.columns(sig)
-            cols += [block[:, j] for j in range(block.shape[1])]
-    return jnp.stack(cols, axis=1)
-
-
-@eqx.filter_jit
-def _term_columns(term, sig: Signals, torque) -> Float[Array, "n k"]:
-    return term.columns(sig, torque)
+    # stacked inside the program, as the model's own design stacks them (the same roundings)
+    return jnp.stack(base_term_columns(terms, sig), axis=1)
 
 
 def design_by_terms(model: ComplianceModel, sig: Signals, torque) -> np.ndarray | None:
@@ -175,9 +165,7 @@ def design_by_terms(model: ComplianceModel, sig: Signals, torque) -> np.ndarray 
         return None
     torque_np = np.asarray(torque, np.float64)
     torque = jnp.asarray(torque_np)
-    extras = {k: v for k, v in sig.extras.items() if k != TORQUE_PATH}  # read by no term here
-    if len(extras) != len(sig.extras):
-        sig = eqx.tree_at(lambda s: s.extras, sig, extras)
+    sig = term_signals(sig)  # no term here reads the torque path
     n, n_seg = torque_np.shape[0], model.n_segments
     out = np.empty((n, model.n_coef))
     for j, (lo, hi) in enumerate(model.segment_bounds):
@@ -215,9 +203,77 @@ def chunks_of(sig: Signals, torque, chunk: int) -> Chunks:
     return Chunks(sig, torque, chunk, design)
 
 
+@eqx.filter_jit
+def _less_columns(term, sig: Signals, coef, r) -> Float[Array, " n"]:
+    return r - term.columns(sig, None) @ coef
+
+
+@eqx.filter_jit
+def _torque_gain(term, sig: Signals, coef) -> Float[Array, " n"]:
+    return term.torque_gain(sig, coef)
+
+
+@eqx.filter_jit
+def _gain_sum(g, gi) -> Float[Array, " n"]:
+    return g + gi
+
+
+@eqx.filter_jit
+def _invert_rest(core: ComplianceModel, sig: Signals, r, g):
+    # linear groups left in `core` (beside a memoryless one) add their gain inside this program
+    for term, c in _split_effects(core)["linear"]:
+        g = term.torque_gain(sig, c) if g is None else g + term.torque_gain(sig, c)
+    return _invert(core, sig, r, g)
+
+
+def _inversion_core(model: ComplianceModel) -> tuple[ComplianceModel, list, list]:
+    """`model` without its torque-free and linear effect groups (what [`_invert`][] reads
+    again), and those groups with their coefficients. Beside a memoryless group the linear
+    groups stay in the model: their gain meets the Newton steps' products inside one program,
+    where XLA may fuse them into other roundings than when it arrives as an input."""
+    memoryless = any(t.torque_kind == "memoryless" for t in model.effect_terms)
+    keep, free, linear = [], [], []
+    coef = np.asarray(model.coef)
+    i = model.n_coef - model.n_effect
+    idx = list(range(i))
+    for term in model.effect_terms:
+        m = len(term.names())
+        group = (term, jnp.asarray(coef[i : i + m]))  # a NumPy slice: no program per shape
+        if term.torque_kind == "none":
+            free.append(group)
+        elif term.torque_kind == "linear" and not memoryless:
+            linear.append(group)
+        else:
+            keep.append(term)
+            idx += range(i, i + m)
+        i += m
+    if not free and not linear:
+        return model, [], []
+    d = {f: getattr(model, f) for f in model.__dataclass_fields__}
+    d["effect_terms"] = tuple(keep)
+    d["coef"] = jnp.asarray(coef[idx])
+    d["active"] = tuple(model.active[j] for j in idx)
+    return ComplianceModel(**d), free, linear
+
+
 def estimate(model: ComplianceModel, data: PipelineData) -> Float[np.ndarray, " n"]:
-    """Torque estimate by inversion (eqs. (26)-(27)); non-finite values where it fails."""
-    return np.asarray(_estimate(canonical(model), data.sig).torque)
+    """Torque estimate by inversion (eqs. (26)-(27)); non-finite values where it fails.
+
+    The torque-free and linear effect groups are evaluated one compiled program per group
+    (as [`design_by_terms`][] does), and the inversion proper runs on the model without them:
+    every structure that differs only in such groups shares one compiled inversion (the same
+    numbers, bit for bit, as [`hdjax.compliance.estimate_torque`][]'s single program).
+    """
+    core, free, linear = _inversion_core(canonical(model))
+    sig = data.sig
+    r = sig.twist
+    for term, c in free:
+        r = _less_columns(term, sig, c, r)
+    g = None
+    for term, c in linear:
+        gi = _torque_gain(term, sig, c)
+        g = gi if g is None else _gain_sum(g, gi)
+    return np.asarray(_invert_rest(core, sig, r, g).torque)
 
 
 def quiet_calibrate(model, pair, notes, throw=True, chunk: int = 0):
