@@ -16,9 +16,9 @@ from .._custom_types import PathLike
 from .._features import find_gaps
 from .._plotting import fixed_margins, pyplot
 from .._solution import Solution
-from ..compliance._lstsq import CalibrationData, prepare
+from ..compliance._lstsq import CalibrationData
 from ._loop import ARCSEC, DiscoveryRecord, residual_spectra
-from ._pipeline import design
+from ._pipeline import PipelineData, design, pipeline_signals
 
 STOPPING_RULE = (
     "a candidate is eligible when pysindy STLSQ selects it and it removes at least min_gain of "
@@ -100,11 +100,11 @@ def _plot_spectra(spectra, chosen, title, path):
     plt.close(fig)
 
 
-def _plot_residual_vs_angle(model, data, title, path):
+def _plot_residual_vs_angle(model, data: PipelineData, title, path):
     plt = pyplot()
 
-    sig, torque = prepare(model, data)
-    # the design compiled once per structure (op by op it dispatches hundreds of small programs)
+    # the loop's own TEST signals (gaps honoured), so the design reuses its compiled programs
+    sig, torque = data.pair()
     r = (np.asarray(sig.twist) - design(model, sig, torque) @ np.asarray(model.coef)) * ARCSEC
     idx = np.linspace(0, r.size - 1, min(r.size, 6000)).astype(int)
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
@@ -178,6 +178,8 @@ def write_figures(solution: Solution, train, folder: Path) -> list[tuple[str, st
     folder.mkdir(parents=True, exist_ok=True)
     figs = []
     models = [result.baseline_model] + [s.model for s in result.steps]
+    m0 = result.baseline_model  # every step keeps the joint and the velocity signal
+    test = pipeline_signals(result.test, m0.ratio, m0.twist_sign, m0.velocity)
     for i, m in enumerate(models):
         nxt = result.steps[i].key if i < len(result.steps) else None
         spectra = result.steps[i].spectra if i < len(result.steps) else result.final_spectra
@@ -191,7 +193,7 @@ def write_figures(solution: Solution, train, folder: Path) -> list[tuple[str, st
         figs.append((title, name))
         name = f"residual_{i}.png"
         label = "starting model" if i == 0 else f"after {result.steps[i - 1].key}"
-        _plot_residual_vs_angle(m, result.test, f"TEST twist residual, {label}", folder / name)
+        _plot_residual_vs_angle(m, test, f"TEST twist residual, {label}", folder / name)
         figs.append((f"TEST twist residual against each angle, {label}", name))
     _plot_torque(result, folder / "torque.png")
     figs.append(("estimated against measured torque on TEST, before and after", "torque.png"))
