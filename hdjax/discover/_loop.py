@@ -106,7 +106,7 @@ class DiscoverOptions:
     chunk: int = 0
     """Samples per chunk of the loop's least-squares fits (calibration, cross-validation,
     candidate scores, intervals), so that no design of the whole record is formed; 0: the
-    whole record at once ([`hdjax.discover._chunked`][])."""
+    whole record at once. Same coefficients to 1e-9 relative; memory bounded by the chunk."""
 
     def __post_init__(self):
         check_chunk(self.chunk)
