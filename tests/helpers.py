@@ -10,6 +10,9 @@ conditioned. Seeds are fixed and printed by the tests that use them.
 from __future__ import annotations
 
 import dataclasses
+import json
+import subprocess
+import sys
 
 import jax
 import jax.numpy as jnp
@@ -17,6 +20,8 @@ import numpy as np
 
 import hdjax
 from hdjax.compliance import ComplianceModel, Signals
+
+from .conftest import REPO
 
 JOINT = hdjax.Joint(ratio=101.0, rated_torque=90.0, name="sim")
 """The simulated joint: ratio 101, rated torque 90 N·m (knots at +-30, +-60 N·m)."""
@@ -234,3 +239,14 @@ def tiny_config(name: str, data: str, outputs: str = "figures = false\ntiming = 
         '[model]\npoly_order = 2\nkinematic = "none"\nper_segment = false\nn_segments = 3\n'
         f"[network]\nenabled = false\n[outputs]\n{outputs}"
     )
+
+
+def run_probe(script: str, args: list[str], env: dict) -> dict:
+    """Run `script` (Python source that ends by printing one JSON line) in a fresh interpreter
+    in the repository, with `args` as its `sys.argv[1:]`; return that JSON, or fail the test
+    with the script's stderr."""
+    out = subprocess.run(
+        [sys.executable, "-c", script, *args], cwd=REPO, env=env, capture_output=True, text=True
+    )
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1])

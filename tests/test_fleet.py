@@ -1,16 +1,24 @@
 """`hdjax fleet` on a 2-worker local Dask cluster: 8 small simulated joint-logs, one broken."""
 
 import json
+import os
+import socket
+import time
 
 import numpy as np
 import pytest
 
 import hdjax
+from hdjax._metrics import error_metrics
 from hdjax.cli import main
-from hdjax.compliance import ComplianceModel, calibrate_lstsq
-from hdjax.config import synthetic_recording
+from hdjax.cli._fleet import WORKER_ENV
+from hdjax.compliance import ComplianceModel, calibrate_lstsq, estimate_torque
+from hdjax.config import save_model, synthetic_recording
 
-pytest.importorskip("distributed")
+from . import discover_data
+from .helpers import assert_figure
+
+distributed = pytest.importorskip("distributed")
 pq = pytest.importorskip("pyarrow.parquet")
 
 JOINTS = {"r1-j1": (160.0, 400.0), "r1-j2": (100.0, 150.0)}
@@ -65,8 +73,6 @@ def test_fleet_two_workers_one_broken_and_resume(tmp_path, capsys):
     for name, value in zip(ref.term_names, np.asarray(ref.coef)):
         np.testing.assert_allclose(row[f"coef:{name}"], value, rtol=1e-12, atol=1e-300)
     assert row["n_samples"] == 1500 and row["twist_rms_arcsec"] > 0
-    from .helpers import assert_figure
-
     for name in JOINTS:
         png = out / "figures" / f"drift_{name}.png"
         assert_figure(png, (825, 880))  # 7.5 x 8 in at 110 dpi
@@ -90,16 +96,10 @@ def test_fleet_two_workers_one_broken_and_resume(tmp_path, capsys):
 
 @pytest.fixture(scope="module")
 def scheduler():
-    import os
-
-    from distributed import Client, LocalCluster
-
-    from hdjax.cli._fleet import WORKER_ENV
-
-    cluster = LocalCluster(
+    cluster = distributed.LocalCluster(
         n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, env=WORKER_ENV
     )
-    with Client(cluster) as client:
+    with distributed.Client(cluster) as client:
         pids = set(client.run(os.getpid).values())
     yield cluster.scheduler_address, pids
     cluster.close()
@@ -123,17 +123,17 @@ def _manifest(tmp_path, task, joints, extra=""):
 def test_fleet_discover_on_a_scheduler_reports_each_amplitude_with_its_interval(
     tmp_path, scheduler, capsys
 ):
-    from .discover_data import ARCSEC, JOINT, synthetic_recording
-
     address, pids = scheduler
     # one undeclared effect, a twice-per-motor-turn harmonic, drifting from 20 to 30 arcsec
     truth = {"2026-01-05": 20.0, "2026-02-02": 30.0}
     logs = []
     for k, (date, amp) in enumerate(truth.items()):
-        rec = synthetic_recording(40 + k, [("harmonic_m", 2.0, amp * ARCSEC)], n=4000)
+        rec = discover_data.synthetic_recording(
+            40 + k, [("harmonic_m", 2.0, amp * discover_data.ARCSEC)], n=4000
+        )
         hdjax.save_csv(rec, tmp_path / f"j-{date}.csv")
         logs.append((f"j-{date}.csv", date))
-    joints = {"j": (JOINT.ratio, JOINT.rated_torque, logs, None)}
+    joints = {"j": (discover_data.RATIO, discover_data.RATED, logs, None)}
     manifest = _manifest(tmp_path, "calibrate+discover", joints, "max_effects = 1\n")
     out = tmp_path / "out"
     code = main(["fleet", str(manifest), "--out", str(out), "--scheduler", address, "-q"])
@@ -158,20 +158,14 @@ def test_fleet_discover_on_a_scheduler_reports_each_amplitude_with_its_interval(
         # (the active ones: a compliance the fit leaves out has a null column)
         k = [row[f"coef:k{j}"] for j in range(1, 6) if row[f"coef:k{j}"] is not None]
         assert len(k) >= 3
-        rad = a["amplitude_arcsec"] * ARCSEC
+        rad = a["amplitude_arcsec"] * discover_data.ARCSEC
         assert rad / max(k) <= a["amplitude_Nm"] <= rad / min(k)
         assert a["cv_gain"] > 0
-    from .helpers import assert_figure
-
     assert_figure(out / "figures" / "drift_j.png", (825, 880))
     assert "harmonic:theta_m:2" in (out / "report.md").read_text()
 
 
 def test_fleet_estimate_applies_the_saved_model_to_each_log(tmp_path, scheduler, capsys):
-    from hdjax._metrics import error_metrics
-    from hdjax.compliance import estimate_torque
-    from hdjax.config import save_model
-
     address, pids = scheduler
     joint = hdjax.Joint(ratio=160.0, rated_torque=400.0)
     recs = {d: synthetic_recording(joint, 1500, seed=60 + k) for k, d in enumerate(DATES[:3])}
@@ -219,8 +213,6 @@ def test_fleet_estimate_applies_the_saved_model_to_each_log(tmp_path, scheduler,
 
 
 def _free_port() -> int:
-    import socket
-
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -236,8 +228,6 @@ def _one_line(capsys, *words):
 
 
 def test_fleet_bad_scheduler_is_one_line_and_quick(tmp_path, capsys):
-    import time
-
     rec = synthetic_recording(hdjax.Joint(ratio=160.0, rated_torque=400.0), 200, seed=1)
     hdjax.save_csv(rec, tmp_path / "a.csv")
     joints = {"j": (160.0, 400.0, [("a.csv", DATES[0])], None)}
