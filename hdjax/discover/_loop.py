@@ -17,9 +17,10 @@
 5. **Acceptance in the torque domain.** For the `n_shortlist` best eligible candidates, the
    whole pipeline runs per fold: calibration on the fold's training part, then inversion
    (eqs. (26)-(27)), with memory states computed causally from the estimate exactly as on
-   TEST. The candidate with the lowest cross-validated torque error is added only if it lowers
-   that error by at least `min_torque_gain`; an accepted step never raises it. Stop when none
-   does, or after `max_effects` effects.
+   TEST. A candidate is added only if it lowers that error by at least `min_torque_gain`; of
+   those, the lowest, or one with fewer columns within one standard error of it (paired over
+   the held-out blocks: the one-standard-error rule). An accepted step never raises it. Stop
+   when none does, or after `max_effects` effects.
 6. Refit on all of TRAIN, estimate torque on TEST and record the errors. TEST is never used
    to choose. At the end every added effect's amplitude gets a 95 % moving-block bootstrap
    interval over TRAIN ([`hdjax.discover._uncertainty`][]), and structure the final model
@@ -65,6 +66,7 @@ from ._pipeline import (
     has_path,
     pipeline_signals,
     quiet_calibrate,
+    within_one_se,
 )
 from ._select import (
     MAX_SINDY_ROWS,
@@ -539,6 +541,28 @@ def _best_per_key(scored, min_gain):
     return sorted(out, key=lambda s: -s[1])
 
 
+def _parsimonious(trials, cv, blocks, options, notes):
+    """The trial to add: of those that lower the cross-validated torque error by
+    `min_torque_gain` and lie within one standard error of the lowest
+    ([`hdjax.discover._pipeline.within_one_se`][]), the one with the fewest columns (then the
+    lowest error). Cross-validated errors that the held-out blocks cannot tell apart do not
+    choose; the simpler effect is named, and a richer one must earn its columns."""
+    lowest = trials[0]
+    level = (1.0 - options.min_torque_gain) * cv.torque_rms
+    near = [
+        t
+        for t in trials
+        if t[0] <= level and (t is lowest or within_one_se(t[7], lowest[7], blocks))
+    ]
+    best = min(near, key=lambda t: (len(t[1].term.names()), t[0]))
+    if best is not lowest:
+        notes.append(
+            f"{best[1].key} ({best[0]:.4g} N·m) chosen over {lowest[1].key} ({lowest[0]:.4g} "
+            "N·m): within one standard error over the held-out blocks, with fewer columns"
+        )
+    return best
+
+
 def discover(
     train: Recording,
     test: Recording,
@@ -687,14 +711,14 @@ def _discover(train, test, joint, options, progress) -> Solution:
             )
             break
         trials.sort(key=lambda x: x[0])
-        best = trials[0]
-        if not best[0] <= (1.0 - options.min_torque_gain) * cv.torque_rms:
+        if not trials[0][0] <= (1.0 - options.min_torque_gain) * cv.torque_rms:
             tried = ", ".join(f"{t[1].key} {t[0]:.4g} N·m" for t in trials)
             notes.append(
                 f"stopped: no candidate lowers the cross-validated torque error "
                 f"({cv.torque_rms:.4g} N·m) by {options.min_torque_gain:.0%} (tried: {tried})"
             )
             break
+        best = _parsimonious(trials, cv, blocks, options, notes)
         _, cand, gain, folds_, stab, new_model, new_est, new_cv = best
         with phase("test"):
             metrics, est = _test_errors(new_model, test_data, joint.rated_torque)

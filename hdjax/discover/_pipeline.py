@@ -327,6 +327,9 @@ class CrossValidation:
     estimates: list[np.ndarray]
     """Per fold, the fold model's estimate over the whole record (the next structure's
     driver rounds start from it)."""
+    squared_errors: np.ndarray | None = None
+    """Per TRAIN sample, the squared held-out torque error of the fold that holds it out (NaN
+    where it is not scored): candidates are compared block by block on the same samples."""
 
 
 def _fold_solve(a: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -432,6 +435,7 @@ def cross_validate(
     n = data.n
     rounds = DRIVER_ROUNDS if path else 1
     sse_t, sse_w, cnt, per_fold, ests = 0.0, 0.0, 0, [], []
+    sq = np.full(n, np.nan)
     model = canonical(model)
     torque = jnp.asarray(data.torque)
     # the held-out samples scored: those whose reference torque lies inside the range the
@@ -478,6 +482,7 @@ def cross_validate(
             w = solver.a[te] @ coef - y[te]
             sse_w += float(np.sum(w**2))
         sse = float(np.sum(e**2)) if np.all(np.isfinite(e)) else np.inf
+        sq[te] = np.where(np.isfinite(e), e**2, np.inf)
         sse_t += sse
         cnt += te.size
         per_fold.append(float(np.sqrt(sse / max(te.size, 1))))
@@ -490,4 +495,29 @@ def cross_validate(
         twist_rms_arcsec=float(np.sqrt(sse_w / max(cnt, 1)) * 180 * 3600 / np.pi) + none,
         fold_torque_rms=per_fold,
         estimates=ests,
+        squared_errors=sq,
     )
+
+
+def within_one_se(candidate: CrossValidation, best: CrossValidation, blocks: np.ndarray) -> bool:
+    """Whether `candidate`'s cross-validated torque error is within one standard error of
+    `best`'s (the one-standard-error rule, Hastie, Tibshirani & Friedman, *The Elements of
+    Statistical Learning*, Section 7.10), the error of the difference taken pairwise over the
+    held-out blocks: both structures are scored on the same samples, and whole blocks no
+    shorter than the residual's correlation length are close to independent.
+
+    The difference of the summed squared errors is $D = \\sum_b d_b$ over the $m$ scored
+    blocks; its standard error is $\\sqrt{m}\\,s_d$, with $s_d$ the blocks' sample standard
+    deviation. Within when $D \\le \\sqrt{m}\\,s_d$.
+    """
+    a, b = candidate.squared_errors, best.squared_errors
+    if a is None or b is None:
+        return candidate.torque_rms <= best.torque_rms
+    scored = np.isfinite(b) & ~np.isnan(a)
+    if not np.all(np.isfinite(a[scored])):
+        return False
+    d = np.bincount(blocks[scored], weights=a[scored] - b[scored], minlength=int(blocks.max()) + 1)
+    d = d[np.bincount(blocks[scored], minlength=d.size) > 0]
+    if d.size < 2:
+        return float(d.sum()) <= 0.0
+    return float(d.sum()) <= float(np.sqrt(d.size) * np.std(d, ddof=1))

@@ -24,9 +24,10 @@ STOPPING_RULE = (
     "a candidate is eligible when pysindy STLSQ selects it and it removes at least min_gain of "
     "the model's cross-validated twist error (5 folds of whole contiguous blocks of TRAIN) in "
     "the standard fold assignment and in at least min_stability of the resampled ones; of the "
-    "best eligible candidates, the one with the lowest cross-validated torque error (whole "
-    "pipeline per fold: calibration, then inversion) is added if it lowers that error by at "
-    "least min_torque_gain; stop when none does"
+    "best eligible candidates, those that lower the cross-validated torque error (whole "
+    "pipeline per fold: calibration, then inversion) by at least min_torque_gain qualify, and "
+    "the lowest is added, or one with fewer columns within one standard error of it (paired "
+    "over the held-out blocks); stop when none qualifies"
 )
 
 

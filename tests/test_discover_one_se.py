@@ -1,0 +1,69 @@
+"""The torque-domain choice among screened candidates: the one-standard-error rule.
+
+Candidates whose cross-validated torque errors the held-out blocks cannot tell apart are
+chosen by parsimony (fewest columns). The standard error of the difference is taken pairwise
+over the held-out blocks; the cases below have it in closed form.
+"""
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from hdjax.discover._loop import DiscoverOptions, _parsimonious
+from hdjax.discover._pipeline import CrossValidation, within_one_se
+
+N_BLOCKS, PER_BLOCK = 10, 10
+BLOCKS = np.repeat(np.arange(N_BLOCKS), PER_BLOCK)
+
+
+def _cv(sq):
+    sq = np.asarray(sq, float)
+    ok = ~np.isnan(sq)
+    return CrossValidation(float(np.sqrt(np.mean(sq[ok]))), 0.0, [], [], squared_errors=sq)
+
+
+def _shifted(c, a):
+    """Per-sample squared errors 1 + c + a(-1)^b in block b: the block differences to a
+    constant 1 are 10 (c ± a), their sum 100 c and its standard error
+    sqrt(10) * 10 a * sqrt(10/9) = 100 a / 3."""
+    return 1.0 + c + a * (-1.0) ** BLOCKS
+
+
+def test_within_one_standard_error_in_closed_form():
+    best = _cv(np.ones(BLOCKS.size))
+    assert within_one_se(_cv(_shifted(0.3, 1.0)), best, BLOCKS)  # 30 <= 33.3
+    assert not within_one_se(_cv(_shifted(0.4, 1.0)), best, BLOCKS)  # 40 > 33.3
+    assert not within_one_se(_cv(_shifted(0.01, 0.0)), best, BLOCKS)  # a constant excess
+    assert within_one_se(_cv(_shifted(-0.01, 0.0)), best, BLOCKS)  # better everywhere
+
+
+def test_unscored_samples_are_left_out_and_a_failed_estimate_is_never_within():
+    sq_best = np.ones(BLOCKS.size)
+    sq = _shifted(0.3, 1.0)
+    # a sample that no fold scores (NaN in both) is left out; here it would carry +1000
+    sq_best[5] = np.nan
+    sq[5] = np.nan
+    assert within_one_se(_cv(sq), _cv(sq_best), BLOCKS)
+    sq[7] = np.inf  # a non-finite estimate on a scored sample
+    assert not within_one_se(_cv(sq), _cv(sq_best), BLOCKS)
+
+
+def _trial(key, n_columns, sq):
+    term = SimpleNamespace(names=lambda: tuple(f"c{i}" for i in range(n_columns)))
+    cv = _cv(sq)
+    return (cv.torque_rms, SimpleNamespace(key=key, term=term), 0.0, [], 1.0, None, None, cv)
+
+
+def test_the_simpler_of_two_indistinguishable_candidates_is_chosen():
+    current = _cv(np.full(BLOCKS.size, 4.0))
+    rich = _trial("harmonic", 2, np.ones(BLOCKS.size))
+    near = _trial("coulomb", 1, _shifted(0.3, 1.0))  # within one standard error of `rich`
+    far = _trial("viscous", 1, _shifted(0.4, 1.0))  # not within
+    opts, notes = DiscoverOptions(), []
+    assert _parsimonious([rich, near, far], current, BLOCKS, opts, notes)[1].key == "coulomb"
+    assert "within one standard error" in notes[0]
+    assert _parsimonious([rich, far], current, BLOCKS, opts, [])[1].key == "harmonic"
+    # a simpler candidate that does not lower the current error by `min_torque_gain` is not
+    # chosen, however close to the lowest
+    current = _cv(np.full(BLOCKS.size, 1.3))
+    assert _parsimonious([rich, near], current, BLOCKS, opts, [])[1].key == "harmonic"
