@@ -120,9 +120,11 @@ def _effect_amplitudes(steps) -> list[dict]:
     (the `amplitude` of each step of `hdjax discover`'s report: a moving-block bootstrap over
     TRAIN): in arcsec of twist (`amplitude_arcsec`, `low`, `high`) and in N·m of equivalent torque
     (`amplitude_Nm`, `low_Nm`, `high_Nm`); `None` where the loop gave none."""
+    # matched by the effect's key (the loop gives each step the interval of its own effect)
+    by_key = {s.amplitude["effect"]: s.amplitude for s in steps if s.amplitude}
     out = []
     for step in steps:
-        amp = step.amplitude or {}
+        amp = by_key.get(step.key, {})
         lo, hi = _pair(amp.get("arcsec_ci95"))
         lo_nm, hi_nm = _pair(amp.get("nm_ci95"))
         out.append(
