@@ -9,7 +9,13 @@ measured, with the loop's own wall/CPU seconds per phase (its last progress line
 Reference, timed in the same run: loading the training CSV and calibrating the paper's model
 on it in this process (the loop's first step).
 
-    python benchmarks/bench_discover_long.py [--samples 1000000]
+With `--chunk N` the command runs a second time with `--chunk N` (the loop's fits accumulated
+over chunks of N samples), and the JSON adds that run's wall, CPU and peak resident memory and
+its precision: the largest relative difference of the final model's coefficients and of the
+reported errors (TEST and cross-validated) from the in-memory run, and whether the effects
+found are the same.
+
+    python benchmarks/bench_discover_long.py [--samples 1000000] [--chunk 16384]
 """
 
 import argparse
@@ -42,9 +48,71 @@ def _phases(stderr: str) -> dict:
     }
 
 
+def _run(cmd, out_dir: Path):
+    """Run the command; `(process, wall s, CPU s, peak RSS GB, report or {})`."""
+    t0 = time.perf_counter()
+    c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (c1.ru_utime + c1.ru_stime) - (c0.ru_utime + c0.ru_stime)
+    peak = c1.ru_maxrss / 1e6
+    report = json.loads((out_dir / "report.json").read_text()) if not proc.returncode else {}
+    return proc, wall, cpu, peak, report
+
+
+def _run_isolated(cmd, out_dir: Path):
+    """[`_run`][] in a fresh Python process, so its peak RSS is the command's own."""
+    code = (
+        "import json, resource, subprocess, sys, time\n"
+        "t0 = time.perf_counter()\n"
+        f"p = subprocess.run({cmd!r}, cwd={str(REPO)!r}, capture_output=True, text=True)\n"
+        "r = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
+        "print(json.dumps(dict(rc=p.returncode, err=p.stderr, wall=time.perf_counter() - t0,"
+        " cpu=r.ru_utime + r.ru_stime, peak=r.ru_maxrss / 1e6)))\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    d = json.loads(res.stdout)
+    proc = subprocess.CompletedProcess(cmd, d["rc"], "", d["err"])
+    report = json.loads((out_dir / "report.json").read_text()) if not d["rc"] else {}
+    return proc, d["wall"], d["cpu"], d["peak"], report
+
+
+def _precision(ref: dict, other: dict) -> dict:
+    """Largest relative differences of `other`'s coefficients and errors from `ref`'s."""
+    import numpy as np
+
+    if not ref or not other:
+        return {}
+
+    def rel(a, b):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        if a.shape != b.shape:
+            return float("inf")
+        return float(np.max(np.abs(a - b)) / max(float(np.max(np.abs(b))), 1e-300))
+
+    errors = lambda r: [
+        r["baseline"]["rms"],
+        r["baseline"]["cv_torque_rms"],
+        r["final"]["rms"],
+        *[s["cv_torque_rms"] for s in r["steps"]],
+        *[s["cv_twist_rms_arcsec"] for s in r["steps"]],
+    ]
+    return dict(
+        effects_equal=ref.get("effects") == other.get("effects"),
+        coef_max_rel=rel(other["final_model"]["coef"], ref["final_model"]["coef"]),
+        errors_max_rel=max(rel(x, y) for x, y in zip(errors(other), errors(ref))),
+        cv_gain_max_abs=max(
+            [abs(a["cv_gain"] - b["cv_gain"]) for a, b in zip(other["steps"], ref["steps"])]
+            or [0.0]
+        ),
+    )
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--samples", type=int, default=1_000_000)
+    ap.add_argument("--chunk", type=int, default=0, help="also run with --chunk N (0: not)")
     args = ap.parse_args()
     import numpy as np
     from bench_discover import EFFECTS, EXPECTED
@@ -68,16 +136,7 @@ def main():
             "--test", str(tmp / "test.csv"), "--joint", str(tmp / "joint.toml"),
             "--out", str(tmp / "out"), "--no-cache",
         ]  # fmt: skip
-        t0 = time.perf_counter()
-        c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-        proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True)
-        wall = time.perf_counter() - t0
-        c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpu = (c1.ru_utime + c1.ru_stime) - (c0.ru_utime + c0.ru_stime)
-        peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6
-        report = (
-            json.loads((tmp / "out" / "report.json").read_text()) if not proc.returncode else {}
-        )
+        proc, wall, cpu, peak, report = _run(cmd, tmp / "out")
         found = set(report.get("effects") or [])
         load_end = [round(x, 2) for x in os.getloadavg()]
         # reference: the first step of the loop, in this process
@@ -107,6 +166,23 @@ def main():
             target_seconds=60.0,
             target_met=bool(proc.returncode == 0 and wall <= 60.0),
         )
+        if args.chunk:
+            cmd_c = [*cmd[:-3], "--out", str(tmp / "out_chunk"), "--no-cache"]
+            cmd_c += ["--chunk", str(args.chunk)]
+            # peak resident memory of a child: ru_maxrss of RUSAGE_CHILDREN is the largest over
+            # all children waited for, so the chunked run is measured in a fresh helper process
+            proc_c, wall_c, cpu_c, peak_c, report_c = _run_isolated(cmd_c, tmp / "out_chunk")
+            out["chunked"] = dict(
+                chunk=args.chunk,
+                exit_code=proc_c.returncode,
+                stderr_tail=proc_c.stderr[-500:] if proc_c.returncode else "",
+                wall_s=wall_c,
+                cpu_s=cpu_c,
+                peak_rss_gb=peak_c,
+                phases_wall_cpu_s=_phases(proc_c.stderr),
+                effects=report_c.get("effects") or [],
+                precision=_precision(report, report_c),
+            )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     print(json.dumps(out, indent=2))
