@@ -61,6 +61,19 @@ def _run(cmd, out_dir: Path):
     return proc, wall, cpu, peak, report
 
 
+def _summary(proc, wall, cpu, peak, report) -> dict:
+    """One run's exit code, times, peak memory, phases and effects, as the JSON records them."""
+    return dict(
+        exit_code=proc.returncode,
+        stderr_tail=proc.stderr[-500:] if proc.returncode else "",
+        wall_s=wall,
+        cpu_s=cpu,
+        phases_wall_cpu_s=_phases(proc.stderr),
+        peak_rss_gb=peak,
+        effects=report.get("effects") or [],
+    )
+
+
 def _run_isolated(cmd, out_dir: Path):
     """[`_run`][] in a fresh Python process, so its peak RSS is the command's own."""
     code = (
@@ -152,14 +165,8 @@ def main():
         cal_s = time.perf_counter() - t0
         out.update(
             train_samples=args.samples,
-            exit_code=proc.returncode,
-            stderr_tail=proc.stderr[-500:] if proc.returncode else "",
-            wall_s=wall,
-            cpu_s=cpu,
+            **_summary(proc, wall, cpu, peak, report),
             load_average_1_5_15_end=load_end,
-            phases_wall_cpu_s=_phases(proc.stderr),
-            peak_rss_gb=peak,
-            effects=report.get("effects") or [],
             test_rms=(report.get("final") or {}).get("rms"),
             expected_found=sorted(EXPECTED & found),
             reference={"load_csv_s": load_s, "baseline_calibration_s": cal_s},
@@ -174,13 +181,7 @@ def main():
             proc_c, wall_c, cpu_c, peak_c, report_c = _run_isolated(cmd_c, tmp / "out_chunk")
             out["chunked"] = dict(
                 chunk=args.chunk,
-                exit_code=proc_c.returncode,
-                stderr_tail=proc_c.stderr[-500:] if proc_c.returncode else "",
-                wall_s=wall_c,
-                cpu_s=cpu_c,
-                peak_rss_gb=peak_c,
-                phases_wall_cpu_s=_phases(proc_c.stderr),
-                effects=report_c.get("effects") or [],
+                **_summary(proc_c, wall_c, cpu_c, peak_c, report_c),
                 precision=_precision(report, report_c),
             )
     finally:
