@@ -63,7 +63,8 @@ def correlation_length(residual, starts=None, *, max_lag: int = 2000) -> int:
 def contiguous_blocks(starts, length: int) -> np.ndarray:
     """Block index per sample: blocks of about `length` samples that never cross a gap.
 
-    Each segment is cut into `max(1, round(len / length))` nearly equal blocks.
+    Each segment is cut into `max(1, len // length)` nearly equal blocks, so every block is at
+    least `length` samples long unless its whole segment is shorter.
     """
     starts = np.asarray(starts, bool)
     n = starts.size
@@ -71,7 +72,7 @@ def contiguous_blocks(starts, length: int) -> np.ndarray:
     out = np.empty(n, int)
     b = 0
     for lo, hi in zip(bounds[:-1], bounds[1:]):
-        m = max(1, int(round((hi - lo) / max(1, length))))
+        m = max(1, int((hi - lo) // max(1, length)))
         edges = np.linspace(lo, hi, m + 1).round().astype(int)
         for j in range(m):
             out[edges[j] : edges[j + 1]] = b
@@ -89,9 +90,20 @@ def fold_assignment(blocks: np.ndarray, n_folds: int, *, rng=None) -> list[np.nd
     return [np.flatnonzero(fold == f) for f in range(n_folds)]
 
 
+def resampled_assignments(n_blocks: int, n_folds: int, n_resamples: int, seed: int):
+    """`n_resamples` random balanced deals of the blocks to the folds (fold of each block),
+    for stability selection; reproducible from `seed`."""
+    rng = np.random.default_rng(seed)
+    return [rng.permutation(np.arange(n_blocks) % n_folds) for _ in range(n_resamples)]
+
+
 def cv_block_length(residual, starts, n_folds: int, minimum: int) -> tuple[int, str | None]:
     """Block length for the folds: the correlation length, at least `minimum` samples and
-    `n / MAX_BLOCKS`, at most what leaves two blocks per fold; a note when the cap binds."""
+    `n / MAX_BLOCKS`, at most what leaves two blocks per fold; a note when the cap binds.
+
+    The note is a warning when the capped blocks are shorter than the correlation length (the
+    record is too short for the residual's memory: held-out blocks are partly predicted from
+    their correlated neighbours, and the cross-validated errors are optimistic)."""
     n = np.asarray(residual).size
     corr = correlation_length(residual, starts)
     cap = max(1, n // (2 * n_folds))
@@ -99,9 +111,18 @@ def cv_block_length(residual, starts, n_folds: int, minimum: int) -> tuple[int, 
     length = max(minimum, corr, -(-n // MAX_BLOCKS))
     note = None
     if length > cap:
-        note = (
-            f"the residual stays correlated over {corr} samples, longer than the "
-            f"{cap}-sample blocks that leave two per cross-validation fold; folds use {cap}"
-        )
+        if corr > cap:
+            note = (
+                f"warning: the residual stays correlated over {corr} samples, longer than the "
+                f"{cap}-sample blocks that leave two per cross-validation fold; folds use {cap}-"
+                "sample blocks, shorter than the correlation time, so the cross-validated errors "
+                "are optimistic (a longer TRAIN recording avoids this)"
+            )
+        else:
+            note = (
+                f"cross-validation blocks of {cap} samples (two per fold), fewer than the "
+                f"{length} asked for, but no shorter than the residual's correlation length "
+                f"({corr} samples)"
+            )
         length = cap
     return length, note

@@ -52,6 +52,7 @@ from ._folds import (
     correlation_length,
     cv_block_length,
     fold_assignment,
+    resampled_assignments,
 )
 from ._gram import block_statistics_batched, block_statistics_streamed, fold_gains
 from ._library import LibraryOptions, build_library, candidate_columns
@@ -79,7 +80,7 @@ from ._select import (
 from ._spectrum import OrderSpectrum, order_spectrum
 from ._timing import Phases, null_phases
 from ._uncertainty import bootstrap_length, effect_intervals
-from ._unexplained import unexplained_structure
+from ._unexplained import all_spectra, unexplained_structure
 
 ARCSEC = 180.0 * 3600.0 / np.pi
 
@@ -563,6 +564,15 @@ def _parsimonious(trials, cv, blocks, options, notes):
     return best
 
 
+def _eligible(ranked, options: DiscoverOptions):
+    """The shortlist of `_best_per_key`'s ranking: selected by the sparse regression,
+    removing at least `min_gain` of the cross-validated twist error on the standard folds, and
+    stable (doing so in at least `min_stability` of the resampled fold assignments)."""
+    return [
+        r for r in ranked if r[3] and r[1] >= options.min_gain and r[4] >= options.min_stability
+    ][: options.n_shortlist]
+
+
 def discover(
     train: Recording,
     test: Recording,
@@ -621,12 +631,10 @@ def _discover(train, test, joint, options, progress) -> Solution:
         notes.append(note)
     blocks = contiguous_blocks(data.starts, block)
     folds = fold_assignment(blocks, options.n_folds)
-    rng = np.random.default_rng(options.seed)
-    n_blocks = int(blocks.max()) + 1
     # each resample deals the blocks to the folds in a random balanced order
-    resamples = [
-        rng.permutation(np.arange(n_blocks) % options.n_folds) for _ in range(options.n_resamples)
-    ]
+    resamples = resampled_assignments(
+        int(blocks.max()) + 1, options.n_folds, options.n_resamples, options.seed
+    )
     with phase("torque CV"):
         cv = cross_validate(model, data, folds, chunk=options.chunk)
     base_cv = cv
@@ -669,9 +677,7 @@ def _discover(train, test, joint, options, progress) -> Solution:
         if len(steps) >= options.max_effects:
             notes.append(f"stopped: reached max_effects = {options.max_effects}")
             break
-        eligible = [
-            r for r in ranked if r[3] and r[1] >= options.min_gain and r[4] >= options.min_stability
-        ][: options.n_shortlist]
+        eligible = _eligible(ranked, options)
         trials = []
         for _, _, _, _, stab, members in eligible:
             # the best grid member that calibrates to an invertible model (a hysteresis scale
@@ -769,15 +775,25 @@ def _discover(train, test, joint, options, progress) -> Solution:
                 s_.amplitude = iv
     with phase("unexplained"):
         corr = correlation_length(resid, data.starts) if resid is not None else 1
+        angles = {s: np.asarray(data.sig.get(s)) for s in ("theta_m", "theta_l")}
         left = unexplained_structure(
             resid if resid is not None else data.twist * 0.0,
-            spectra,
+            spectra
+            if resid is None
+            else all_spectra(
+                resid,
+                angles,
+                {"theta_m": options.library.orders_m, "theta_l": options.library.orders_l},
+                spectra,
+            ),
             {
                 "torque": data.torque,
                 "omega_m": np.asarray(data.sig.omega_m),
                 "omega_l": np.asarray(data.sig.omega_l),
             },
             correlation_length=corr,
+            starts=data.starts,
+            angles=angles,
         )
     say(phase.line())
     final = steps[-1].test if steps else base_metrics
