@@ -753,6 +753,16 @@ def _discover(train, test, joint, options, progress) -> Solution:
             f"{stab:.0%}, CV torque {new_cv.torque_rms:.4g} N·m); test torque RMS "
             f"{metrics.rms:.4g} N·m, max {metrics.max:.4g} N·m"
         )
+        before = steps[-2].test.rms if len(steps) > 1 else base_metrics.rms
+        if metrics.rms > before:
+            # TEST never chooses, so a step it disagrees with stays: say so, loudly
+            rise = (
+                f"warning: step {len(steps)} ({cand.key}) raised the TEST torque RMS from "
+                f"{before:.4g} to {metrics.rms:.4g} N·m (+{metrics.rms / before - 1:.1%}), "
+                "although cross-validation on TRAIN lowered the torque error: TRAIN and TEST differ"
+            )
+            notes.append(rise)
+            say(rise)
     # amplitudes with intervals, and what is left
     intervals = []
     with phase("intervals"):
