@@ -311,3 +311,15 @@ def test_report_json_lists_what_the_loop_leaves_unexplained(first, tmp_path):
     assert abs(orders[0]["order"] - 3.3) < 0.05
     np.testing.assert_allclose(orders[0]["amplitude_arcsec"], 4.0, rtol=0.25)
     assert "harmonic:theta_m" not in " ".join(rep["effects"])
+
+
+def test_the_loop_reports_capped_fold_blocks_in_its_notes():
+    # 1000 TRAIN samples, 5 folds: the 200-sample default blocks would leave fewer than two
+    # per fold; the loop caps them at 100 and says so (a white residual: no warning)
+    train = synthetic_recording(21, [], n=1000)
+    res = discover(train, train, JOINT, DiscoverOptions(max_effects=0))
+    assert res.aux.cv_block_samples == 100
+    capped = [n for n in res.aux.notes if "cross-validation blocks of 100 samples" in n]
+    assert len(capped) == 1 and "no shorter than the residual's correlation length" in capped[0]
+    corr = correlation_length(res.aux.train_residual_final)
+    assert corr <= 100
