@@ -79,7 +79,7 @@ from ._select import (
 )
 from ._spectrum import OrderSpectrum, order_spectrum
 from ._timing import Phases, null_phases
-from ._uncertainty import bootstrap_length, effect_intervals
+from ._uncertainty import bootstrap_length, effect_intervals, instrument_torque
 from ._unexplained import all_spectra, unexplained_structure
 
 ARCSEC = 180.0 * 3600.0 / np.pi
@@ -771,16 +771,19 @@ def _discover(train, test, joint, options, progress) -> Solution:
             if options.chunk:
                 chunks = chunks_of(sig_d, torque, options.chunk)
                 res_final = twist_residual(canonical(model), chunks)
-                length = bootstrap_length(block, res_final, data.starts)
+                length = bootstrap_length(res_final, data.starts)
                 intervals = effect_intervals(
                     model, None, data, est_train, length=length, chunks=chunks
                 )
             else:
                 a_final = design(model, sig_d, torque)
                 res_final = data.twist - a_final @ np.asarray(model.coef)
-                length = bootstrap_length(block, res_final, data.starts)
-                intervals = effect_intervals(model, a_final, data, est_train, length=length)
-                del a_final
+                length = bootstrap_length(res_final, data.starts)
+                z = design(model, sig_d, instrument_torque(torque, data.starts))
+                intervals = effect_intervals(
+                    model, a_final, data, est_train, length=length, instruments=z
+                )
+                del a_final, z
             for s_, iv in zip(steps, intervals):
                 s_.amplitude = iv
     with phase("unexplained"):

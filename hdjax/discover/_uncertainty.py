@@ -1,12 +1,22 @@
-"""The amplitude of every added effect, with a 95 % moving-block bootstrap interval over TRAIN.
+r"""The amplitude of every added effect, with a 95 % moving-block bootstrap interval over TRAIN.
 
-An effect's coefficients are those of its columns in the final least-squares fit (Song et al.
-eqs. (15)-(17)); by the Frisch-Waugh-Lovell theorem they are the regression of the twist on the
-effect's columns after both are made orthogonal to every other column of the model. Resampling
-that small regression by moving blocks (Kunsch 1989) keeps the residual's serial correlation:
-blocks of `length` samples, no shorter than the residual's correlation length, drawn with
-replacement until they cover the record; block sums are precomputed by cumulative sums, so a
-few hundred replicates cost little.
+An effect's coefficients are those of its columns in the final fit (Song et al. eqs.
+(15)-(17)); by the Frisch-Waugh-Lovell theorem they are the regression of the twist on the
+effect's columns after both are made orthogonal to every other column of the model.
+
+**Errors in the variables.** The design's torque columns are built from the measured reference
+torque, so the sensor's noise attenuates the compliance and biases every effect that moves with
+the torque. With `instruments` (the design at [`instrument_torque`][], the mean of each
+sample's two neighbours, independent of a white sensor noise at the sample) the coefficients
+are two-stage least squares: the design's columns are replaced by their fits on the
+instruments' (columns free of the torque are reproduced), then the regression above is solved
+(Fuller 1987, ch. 2; the two-stage estimator of Theil 1953).
+
+**Bootstrap.** Moving blocks (Kunsch 1989) of `length` samples, no shorter than twice the
+residual's correlation length, drawn with replacement until they cover the record, resample
+the estimating equation $x_\perp^T(y - X\beta) = 0$ with the structural residual
+$y - X\hat\beta$ of the design itself (so the torque noise is in it); block sums come from
+cumulative sums, so a few hundred replicates cost little.
 
 **Partialling out.** The projections onto the other columns come from the design's Gram
 matrix, formed once for all effects ([`partial_out`][]): per effect a small Cholesky solve on
@@ -15,15 +25,20 @@ corrected semi-normal equations of [`hdjax.compliance.calibrate_lstsq`][], as ac
 while the scaled condition number is at most `CSNE_MAX_COND`; above it, a QR of those columns).
 No $n \times p$ factor is formed per effect, and no scaled copy of the design.
 
-**Amplitude.** A harmonic's is $\\sqrt{a^2 + b^2}$ (the twist it adds at its peak); a
+**Amplitude.** A harmonic's is $\sqrt{a^2 + b^2}$ (the twist it adds at its peak); a
 one-column effect's is its coefficient times the column's largest magnitude over TRAIN (signed:
 the twist it adds at its extreme, e.g. a Coulomb level). It is given in arcsec of twist and in
 N·m of *equivalent torque*: the twist divided by the model's local compliance
-$\\partial\\Delta\\theta/\\partial T$, averaged with the effect column's energy as weights (the
-torque that would have to act through the flexspline to produce the same twist).
+$\partial\Delta\theta/\partial T$, averaged with the effect column's energy as weights (the
+torque that would have to act through the flexspline to produce the same twist). The ratio is
+formed in every replicate from the replicate's own blocks, which for it are also no shorter
+than twice the torque's correlation length (the compliance follows the torque, so a twist
+amplitude and the compliance it is divided by vary together along the record).
 
 References: H. R. Kunsch, "The jackknife and the bootstrap for general stationary
-observations", Ann. Statist. 17 (1989) 1217-1241.
+observations", Ann. Statist. 17 (1989) 1217-1241; W. A. Fuller, "Measurement Error Models",
+Wiley 1987; H. Theil, "Repeated least squares applied to complete equation systems", The Hague
+1953.
 """
 
 from __future__ import annotations
@@ -35,7 +50,7 @@ from ..compliance import ComplianceModel
 from ..compliance._lstsq import CSNE_MAX_COND
 from ..compliance._stream import scaled_cho_factor
 from ._chunked import Chunks
-from ._folds import correlation_length
+from ._folds import MAX_BLOCKS, correlation_length
 from ._pipeline import PipelineData, canonical
 
 ARCSEC = 180.0 * 3600.0 / np.pi
@@ -43,10 +58,11 @@ N_BOOTSTRAP = 400
 LEVEL = 0.95
 
 
-def bootstrap_length(cv_block: int, residual, starts) -> int:
-    """Bootstrap block length: the cross-validation block, and at least twice the residual's
-    correlation length."""
-    return int(max(cv_block, 2 * correlation_length(residual, starts)))
+def bootstrap_length(residual, starts) -> int:
+    """Bootstrap block length: twice the residual's correlation length, and long enough that
+    the record holds at most `MAX_BLOCKS` blocks (the replicates' block starts stay small)."""
+    n = int(np.asarray(residual).size)
+    return int(max(2 * correlation_length(residual, starts), -(-n // MAX_BLOCKS), 1))
 
 
 def _amplitude(term, beta: np.ndarray, peak: np.ndarray) -> np.ndarray:
@@ -64,6 +80,39 @@ def _local_compliance(model: ComplianceModel, torque: np.ndarray) -> np.ndarray:
     return k[seg]
 
 
+def instrument_torque(torque, starts) -> np.ndarray:
+    """The reference torque's instrument: at each sample, the mean of its two neighbours in the
+    same segment (one neighbour at a segment's ends, the sample itself in a one-sample segment).
+
+    The torque sensor's noise is white, so the neighbours' mean is independent of the noise at
+    the sample, while the true torque is smooth at the sampling rate."""
+    t = np.asarray(torque, np.float64)
+    starts = np.asarray(starts, bool)
+    n = t.size
+    ends = np.r_[starts[1:], True]
+    prev = np.where(starts, np.nan, np.r_[np.nan, t[:-1]])
+    nxt = np.where(ends, np.nan, np.r_[t[1:], np.nan])
+    both = np.vstack([prev, nxt])
+    cnt = np.sum(np.isfinite(both), axis=0)
+    out = np.where(cnt > 0, np.nansum(both, axis=0) / np.maximum(cnt, 1), t)
+    return out.reshape(n)
+
+
+def _two_stage(design: np.ndarray, instruments: np.ndarray, active: np.ndarray) -> np.ndarray:
+    """`design` with its active columns replaced by their least-squares fits on the active
+    columns of `instruments` (the first stage of two-stage least squares): columns that do not
+    depend on the reference torque are reproduced, the others lose the sensor noise."""
+    cols = np.flatnonzero(active)
+    z = instruments[:, cols]
+    dz = np.sqrt(np.sum(z * z, axis=0))
+    dz[dz == 0] = 1.0
+    q, _ = np.linalg.qr(z / dz)
+    out = design.copy()
+    x = design[:, cols]
+    out[:, cols] = q @ (q.T @ x)
+    return out
+
+
 def effect_intervals(
     model: ComplianceModel,
     design: np.ndarray | None,
@@ -71,6 +120,7 @@ def effect_intervals(
     estimate: np.ndarray,
     *,
     length: int,
+    instruments: np.ndarray | None = None,
     n_bootstrap: int = N_BOOTSTRAP,
     seed: int = 0,
     chunks: Chunks | None = None,
@@ -80,9 +130,11 @@ def effect_intervals(
     **Arguments:** `model` (calibrated on `data`), `design` (its design matrix on `data`, with
     the same hysteresis driver as at calibration), `estimate` (its torque estimate on `data`,
     where the local compliance is read), `length` (bootstrap block length in samples),
-    `chunks` (instead of `design`: the record with the same driver, whose design rows are
-    formed chunk by chunk for the Gram matrix and the projections,
-    [`partial_out_chunked`][]).
+    `instruments` (optional: the design evaluated at [`instrument_torque`][]; with it the
+    amplitudes are two-stage least-squares estimates, which the torque sensor's noise does not
+    bias), `chunks` (instead of `design`: the record with the same driver, whose design rows
+    are formed chunk by chunk for the Gram matrix and the projections,
+    [`partial_out_chunked`][]; the amplitudes are then least squares, without instruments).
 
     **Returns:** per effect, a dict with `effect`, `arcsec`, `arcsec_ci95`, `nm`, `nm_ci95`,
     `block_samples`.
@@ -91,15 +143,22 @@ def effect_intervals(
     y = data.twist
     n = y.size
     if chunks is None:
-        gram = _gram(design, y)
+        fit = design if instruments is None else _two_stage(design, instruments, active)
+        gram = _gram(fit, y)
+        cols = np.flatnonzero(active)
+        coef = np.zeros(model.n_coef)
+        coef[cols] = np.linalg.lstsq(fit[:, cols], y, rcond=None)[0]
+        resid = y - design @ coef
     else:
         model = canonical(model)
         gram = _gram_chunked(model, chunks, y)
     comp = _local_compliance(model, np.asarray(estimate))
     rng = np.random.default_rng(seed)
     length = int(max(1, min(length, n // 4)))
-    n_blocks = int(np.ceil(n / length))
-    starts = rng.integers(0, n - length + 1, size=(n_bootstrap, n_blocks))
+    # the equivalent torque divides by a compliance that follows the torque: its replicates'
+    # blocks also hold the torque's dependence
+    length_nm = int(max(length, min(2 * correlation_length(data.torque, data.starts), n // 4)))
+    schemes = [_Blocks(rng, n, length, n_bootstrap), _Blocks(rng, n, length_nm, n_bootstrap)]
     out = []
     i = model.n_coef - model.n_effect
     for term in model.effect_terms:
@@ -109,36 +168,60 @@ def effect_intervals(
         others = np.flatnonzero(active & ~np.isin(np.arange(model.n_coef), sl))
         if chunks is None:
             x = design[:, sl]
-            xp, yp = partial_out(design, y, others, sl, gram)
+            xp, _ = partial_out(fit, y, others, sl, gram)
+            beta = coef[sl]
+            # the structural residual: that of the design itself, torque noise included
+            target = xp @ beta + resid
         else:
-            x, xp, yp = partial_out_chunked(model, chunks, y, others, sl, gram)
-        beta = np.linalg.lstsq(xp, yp, rcond=None)[0]
+            x, xp, target = partial_out_chunked(model, chunks, y, others, sl, gram)
+            beta = np.linalg.lstsq(xp, target, rcond=None)[0]
         peak = np.abs(x).max(axis=0)
         amp = float(_amplitude(term, beta[None, :], peak)[0])
-        # moving-block bootstrap of the small regression through block sums
+        # the replicates resample the estimating equation xp'(y - X beta) = 0
         xx = np.einsum("ni,nj->nij", xp, xp).reshape(n, m * m)
-        xy = xp * yp[:, None]
-        cxx = np.vstack([np.zeros(m * m), np.cumsum(xx, axis=0)])
-        cxy = np.vstack([np.zeros(m), np.cumsum(xy, axis=0)])
-        bxx = (cxx[starts + length] - cxx[starts]).sum(axis=1).reshape(n_bootstrap, m, m)
-        bxy = (cxy[starts + length] - cxy[starts]).sum(axis=1)
-        boot = np.linalg.solve(bxx + 1e-300 * np.eye(m), bxy[..., None])[..., 0]
-        amps = _amplitude(term, boot, peak)
-        lo, hi = np.quantile(amps, [(1 - LEVEL) / 2, (1 + LEVEL) / 2])
-        # local compliance weighted by the effect's column energy: twist -> equivalent torque
+        xy = xp * target[:, None]
+        # local compliance weighted by the effect's column energy: twist -> equivalent torque,
+        # the ratio formed in each replicate from the same blocks
         w = np.sum(x * x, axis=1)
-        k_eff = float(np.sum(w * comp) / np.sum(w)) if np.sum(w) > 0 else float(np.mean(comp))
+        if not np.sum(w) > 0:
+            w = np.ones(n)
+        k_eff = float(np.sum(w * comp) / np.sum(w))
+        ci = []
+        for blocks in schemes:
+            boot = np.linalg.solve(
+                blocks.sums(xx).reshape(-1, m, m) + 1e-300 * np.eye(m), blocks.sums(xy)[..., None]
+            )
+            amps = _amplitude(term, boot[..., 0], peak)
+            k_boot = blocks.sums(w * comp) / np.maximum(blocks.sums(w), np.finfo(float).tiny)
+            ci.append((amps, amps / k_boot))
+        q = [(1 - LEVEL) / 2, (1 + LEVEL) / 2]
+        lo, hi = np.quantile(ci[0][0], q)
+        nm_lo, nm_hi = np.quantile(ci[1][1], q)
         out.append(
             dict(
                 effect=term.key,
                 arcsec=amp * ARCSEC,
                 arcsec_ci95=[float(lo) * ARCSEC, float(hi) * ARCSEC],
                 nm=amp / k_eff,
-                nm_ci95=[float(lo) / k_eff, float(hi) / k_eff],
+                nm_ci95=[float(nm_lo), float(nm_hi)],
                 block_samples=length,
+                nm_block_samples=length_nm,
             )
         )
     return out
+
+
+class _Blocks:
+    """Moving blocks of `length` samples drawn with replacement until they cover `n` samples,
+    `n_bootstrap` times; `sums(v)` is each replicate's sum of `v` (through cumulative sums)."""
+
+    def __init__(self, rng, n: int, length: int, n_bootstrap: int):
+        self.length = length
+        self.starts = rng.integers(0, n - length + 1, size=(n_bootstrap, -(-n // length)))
+
+    def sums(self, v: np.ndarray) -> np.ndarray:
+        c = np.concatenate([np.zeros((1,) + v.shape[1:]), np.cumsum(v, axis=0)])
+        return (c[self.starts + self.length] - c[self.starts]).sum(axis=1)
 
 
 def _gram(design: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -149,6 +232,48 @@ def _gram(design: np.ndarray, y: np.ndarray) -> np.ndarray:
     g[:p, p] = g[p, :p] = y @ design
     g[p, p] = y @ y
     return g
+
+
+def partial_out(
+    design: np.ndarray, y: np.ndarray, others: np.ndarray, cols: np.ndarray, gram: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The columns `cols` of `design` and the target `y`, each made orthogonal to the columns
+    `others` (the residuals of their least-squares fits on them, Frisch-Waugh-Lovell).
+
+    `gram` is the Gram matrix of `[design | y]`. The fits are the corrected semi-normal
+    equations on the Jacobi-scaled Gram block of `others` (one refinement step with the true
+    residual), or, above `CSNE_MAX_COND` or when Cholesky fails, a QR of those columns.
+    **Returns:** `(x_perp, y_perp)`, shapes `(n, len(cols))` and `(n,)`.
+    """
+    p = design.shape[1]
+    target = np.concatenate([design[:, cols], y[:, None]], axis=1)
+    if others.size == 0:
+        return target[:, :-1], target[:, -1]
+    d = np.sqrt(np.diag(gram)[others])
+    d[d == 0] = 1.0
+    gs = gram[np.ix_(others, others)] / np.outer(d, d)
+    chol = scaled_cho_factor(gs, CSNE_MAX_COND)
+    if chol is None:
+        q, _ = np.linalg.qr(design[:, others] / d)
+        t = target - q @ (q.T @ target)
+        return t[:, :-1], t[:, -1]
+    factor = chol[0]
+    # coefficients on all columns, zero off `others`, so no copy of those columns is made
+    w = np.zeros((p, target.shape[1]))
+    w[others] = (
+        scipy.linalg.cho_solve(
+            factor, gram[np.ix_(others, np.r_[cols, p])] / d[:, None], check_finite=False
+        )
+        / d[:, None]
+    )
+    r = target - design @ w
+    # one refinement step with the true residual removes the squared condition number
+    w[others] += (
+        scipy.linalg.cho_solve(factor, (design.T @ r)[others] / d[:, None], check_finite=False)
+        / d[:, None]
+    )
+    t = target - design @ w
+    return t[:, :-1], t[:, -1]
 
 
 def _gram_chunked(model, chunks: Chunks, y: np.ndarray) -> np.ndarray:
@@ -216,45 +341,3 @@ def partial_out_chunked(model, chunks: Chunks, y, others, cols, gram):
         x[lo:hi] = a[:, cols]
         t[lo:hi] = target(lo, hi, a) - a @ w
     return x, t[:, :-1], t[:, -1]
-
-
-def partial_out(
-    design: np.ndarray, y: np.ndarray, others: np.ndarray, cols: np.ndarray, gram: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """The columns `cols` of `design` and the target `y`, each made orthogonal to the columns
-    `others` (the residuals of their least-squares fits on them, Frisch-Waugh-Lovell).
-
-    `gram` is the Gram matrix of `[design | y]`. The fits are the corrected semi-normal
-    equations on the Jacobi-scaled Gram block of `others` (one refinement step with the true
-    residual), or, above `CSNE_MAX_COND` or when Cholesky fails, a QR of those columns.
-    **Returns:** `(x_perp, y_perp)`, shapes `(n, len(cols))` and `(n,)`.
-    """
-    p = design.shape[1]
-    target = np.concatenate([design[:, cols], y[:, None]], axis=1)
-    if others.size == 0:
-        return target[:, :-1], target[:, -1]
-    d = np.sqrt(np.diag(gram)[others])
-    d[d == 0] = 1.0
-    gs = gram[np.ix_(others, others)] / np.outer(d, d)
-    chol = scaled_cho_factor(gs, CSNE_MAX_COND)
-    if chol is None:
-        q, _ = np.linalg.qr(design[:, others] / d)
-        t = target - q @ (q.T @ target)
-        return t[:, :-1], t[:, -1]
-    factor = chol[0]
-    # coefficients on all columns, zero off `others`, so no copy of those columns is made
-    w = np.zeros((p, target.shape[1]))
-    w[others] = (
-        scipy.linalg.cho_solve(
-            factor, gram[np.ix_(others, np.r_[cols, p])] / d[:, None], check_finite=False
-        )
-        / d[:, None]
-    )
-    r = target - design @ w
-    # one refinement step with the true residual removes the squared condition number
-    w[others] += (
-        scipy.linalg.cho_solve(factor, (design.T @ r)[others] / d[:, None], check_finite=False)
-        / d[:, None]
-    )
-    t = target - design @ w
-    return t[:, :-1], t[:, -1]
