@@ -772,8 +772,9 @@ def _discover(train, test, joint, options, progress) -> Solution:
                 chunks = chunks_of(sig_d, torque, options.chunk)
                 res_final = twist_residual(canonical(model), chunks)
                 length = bootstrap_length(res_final, data.starts)
+                inst = chunks_of(sig_d, instrument_torque(torque, data.starts), options.chunk)
                 intervals = effect_intervals(
-                    model, None, data, est_train, length=length, chunks=chunks
+                    model, None, data, est_train, length=length, chunks=chunks, instruments=inst
                 )
             else:
                 a_final = design(model, sig_d, torque)

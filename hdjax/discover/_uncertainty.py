@@ -98,19 +98,73 @@ def instrument_torque(torque, starts) -> np.ndarray:
     return out.reshape(n)
 
 
-def _two_stage(design: np.ndarray, instruments: np.ndarray, active: np.ndarray) -> np.ndarray:
-    """`design` with its active columns replaced by their least-squares fits on the active
-    columns of `instruments` (the first stage of two-stage least squares): columns that do not
-    depend on the reference torque are reproduced, the others lose the sensor noise."""
-    cols = np.flatnonzero(active)
-    z = instruments[:, cols]
-    dz = np.sqrt(np.sum(z * z, axis=0))
-    dz[dz == 0] = 1.0
-    q, _ = np.linalg.qr(z / dz)
-    out = design.copy()
-    x = design[:, cols]
-    out[:, cols] = q @ (q.T @ x)
-    return out
+class _ArrayRows:
+    """A design held in memory, as a one-chunk row source (`designs(model)` as `Chunks`)."""
+
+    def __init__(self, a: np.ndarray):
+        self.a = a
+
+    def designs(self, model):
+        yield 0, self.a.shape[0], self.a
+
+
+class _FitRows:
+    """The design's rows with the active columns replaced by their first-stage fits on the
+    instruments' rows, `Z[:, cols] @ gamma` (two-stage least squares)."""
+
+    def __init__(self, rows, inst, cols: np.ndarray, gamma: np.ndarray):
+        self.rows, self.inst, self.cols, self.gamma = rows, inst, cols, gamma
+
+    def designs(self, model):
+        for (lo, hi, a), (_, _, z) in zip(self.rows.designs(model), self.inst.designs(model)):
+            f = np.array(a, copy=True)
+            f[:, self.cols] = z[:, self.cols] @ self.gamma
+            yield lo, hi, f
+
+
+RowSource = Chunks | _ArrayRows | _FitRows
+"""Where design rows come from, chunk by chunk: `designs(model)` yields `(lo, hi, rows)`."""
+
+
+def _csne(gram_cc: np.ndarray, rhs: np.ndarray, residual_pass) -> np.ndarray:
+    """Solve `gram_cc w = rhs` on the Jacobi-scaled Gram block, refined once with
+    `residual_pass(w)` (the columns' products with the true residual; corrected semi-normal
+    equations), or by least squares on the Gram block above `CSNE_MAX_COND`."""
+    d = np.sqrt(np.diag(gram_cc))
+    d[d == 0] = 1.0
+    gs = gram_cc / np.outer(d, d)
+    chol = scaled_cho_factor(gs, CSNE_MAX_COND)
+    if chol is None:
+        solve = lambda r: scipy.linalg.lstsq(gs, r / _col(d, r))[0] / _col(d, r)  # noqa: E731
+    else:
+        solve = lambda r: (  # noqa: E731
+            scipy.linalg.cho_solve(chol[0], r / _col(d, r), check_finite=False) / _col(d, r)
+        )
+    w = solve(rhs)
+    return w + solve(residual_pass(w))
+
+
+def _col(d: np.ndarray, r: np.ndarray) -> np.ndarray:
+    return d if r.ndim == 1 else d[:, None]
+
+
+def _two_stage(model, rows, inst, cols: np.ndarray) -> _FitRows:
+    """The first stage of two-stage least squares over row sources: the active columns' fits
+    on the active instrument columns (columns free of the reference torque are reproduced)."""
+    zz = zx = 0.0
+    for (_, _, a), (_, _, z) in zip(rows.designs(model), inst.designs(model)):
+        zc = z[:, cols]
+        zz = zz + zc.T @ zc
+        zx = zx + zc.T @ a[:, cols]
+
+    def residual_pass(g):
+        out = 0.0
+        for (_, _, a), (_, _, z) in zip(rows.designs(model), inst.designs(model)):
+            zc = z[:, cols]
+            out = out + zc.T @ (a[:, cols] - zc @ g)
+        return out
+
+    return _FitRows(rows, inst, cols, _csne(zz, zx, residual_pass))
 
 
 def effect_intervals(
@@ -120,7 +174,7 @@ def effect_intervals(
     estimate: np.ndarray,
     *,
     length: int,
-    instruments: np.ndarray | None = None,
+    instruments: np.ndarray | Chunks | None = None,
     n_bootstrap: int = N_BOOTSTRAP,
     seed: int = 0,
     chunks: Chunks | None = None,
@@ -130,11 +184,11 @@ def effect_intervals(
     **Arguments:** `model` (calibrated on `data`), `design` (its design matrix on `data`, with
     the same hysteresis driver as at calibration), `estimate` (its torque estimate on `data`,
     where the local compliance is read), `length` (bootstrap block length in samples),
-    `instruments` (optional: the design evaluated at [`instrument_torque`][]; with it the
-    amplitudes are two-stage least-squares estimates, which the torque sensor's noise does not
-    bias), `chunks` (instead of `design`: the record with the same driver, whose design rows
-    are formed chunk by chunk for the Gram matrix and the projections,
-    [`partial_out_chunked`][]; the amplitudes are then least squares, without instruments).
+    `instruments` (optional: the design evaluated at [`instrument_torque`][], or with `chunks`
+    the `Chunks` of that torque; with it the amplitudes are two-stage least-squares estimates,
+    which the torque sensor's noise does not bias), `chunks` (instead of `design`: the record
+    with the same driver, whose design rows are formed chunk by chunk for the Gram matrix and
+    the projections, [`partial_out_chunked`][]).
 
     **Returns:** per effect, a dict with `effect`, `arcsec`, `arcsec_ci95`, `nm`, `nm_ci95`,
     `block_samples`.
@@ -142,16 +196,38 @@ def effect_intervals(
     active = np.asarray(model.active)
     y = data.twist
     n = y.size
-    if chunks is None:
-        fit = design if instruments is None else _two_stage(design, instruments, active)
-        gram = _gram(fit, y)
-        cols = np.flatnonzero(active)
-        coef = np.zeros(model.n_coef)
-        coef[cols] = np.linalg.lstsq(fit[:, cols], y, rcond=None)[0]
-        resid = y - design @ coef
-    else:
+    cols = np.flatnonzero(active)
+    if chunks is not None:
         model = canonical(model)
-        gram = _gram_chunked(model, chunks, y)
+    rows = _ArrayRows(design) if chunks is None else chunks
+    if instruments is None:
+        fit = rows
+    else:
+        inst = _ArrayRows(instruments) if chunks is None else instruments
+        fit = _two_stage(model, rows, inst, cols)
+    if chunks is None:
+        fit_a = next(iter(fit.designs(model)))[2]
+        gram = _gram(fit_a, y)
+    else:
+        gram = _gram_chunked(model, fit, y)
+    p = model.n_coef
+
+    def residual_pass(w):
+        out = 0.0
+        for lo, hi, f in fit.designs(model):
+            out = out + f[:, cols].T @ (y[lo:hi] - f[:, cols] @ w)
+        return out
+
+    coef = np.zeros(p)
+    coef[cols] = _csne(gram[np.ix_(cols, cols)], gram[cols, p], residual_pass)
+    # the structural residual: that of the design itself (torque noise included), and the
+    # effect columns themselves
+    resid = np.empty(n)
+    eff = np.arange(p - model.n_effect, p)
+    x_all = np.empty((n, eff.size))
+    for lo, hi, a in rows.designs(model):
+        resid[lo:hi] = y[lo:hi] - a @ coef
+        x_all[lo:hi] = a[:, eff]
     comp = _local_compliance(model, np.asarray(estimate))
     rng = np.random.default_rng(seed)
     length = int(max(1, min(length, n // 4)))
@@ -166,15 +242,13 @@ def effect_intervals(
         sl = np.arange(i, i + m)
         i += m
         others = np.flatnonzero(active & ~np.isin(np.arange(model.n_coef), sl))
+        x = x_all[:, sl - eff[0]]
         if chunks is None:
-            x = design[:, sl]
-            xp, _ = partial_out(fit, y, others, sl, gram)
-            beta = coef[sl]
-            # the structural residual: that of the design itself, torque noise included
-            target = xp @ beta + resid
+            xp, _ = partial_out(fit_a, y, others, sl, gram)
         else:
-            x, xp, target = partial_out_chunked(model, chunks, y, others, sl, gram)
-            beta = np.linalg.lstsq(xp, target, rcond=None)[0]
+            _, xp, _ = partial_out_chunked(model, fit, y, others, sl, gram)
+        beta = coef[sl]
+        target = xp @ beta + resid
         peak = np.abs(x).max(axis=0)
         amp = float(_amplitude(term, beta[None, :], peak)[0])
         # the replicates resample the estimating equation xp'(y - X beta) = 0
@@ -276,7 +350,7 @@ def partial_out(
     return t[:, :-1], t[:, -1]
 
 
-def _gram_chunked(model, chunks: Chunks, y: np.ndarray) -> np.ndarray:
+def _gram_chunked(model, chunks: RowSource, y: np.ndarray) -> np.ndarray:
     """[`_gram`][] summed over the design's chunks."""
     g = None
     for lo, hi, a in chunks.designs(model):
@@ -285,7 +359,7 @@ def _gram_chunked(model, chunks: Chunks, y: np.ndarray) -> np.ndarray:
     return g
 
 
-def partial_out_chunked(model, chunks: Chunks, y, others, cols, gram):
+def partial_out_chunked(model, chunks: RowSource, y, others, cols, gram):
     """[`partial_out`][] with the design formed chunk by chunk: the same corrected
     semi-normal equations (the refinement's $A^\top r$ summed over a pass), or above
     `CSNE_MAX_COND` the QR of those columns folded in chunk by chunk (TSQR).
