@@ -26,6 +26,7 @@ from hdjax.compliance import Signals
 from hdjax.discover import DiscoverOptions, build_library, discover
 from hdjax.discover._folds import (
     GAP_FACTOR,
+    MAX_BLOCKS,
     contiguous_blocks,
     correlation_length,
     cv_block_length,
@@ -164,8 +165,9 @@ def test_fold_blocks_are_no_shorter_than_the_correlation_time_and_never_cross_a_
     phi = 0.97  # correlation length ceil(-1/ln phi) = 33 samples
     corr_true = math.ceil(-1.0 / math.log(phi))
     dt = 4e-3
-    # segment lengths that are not multiples of the block (1.6 blocks round up to 2 short
-    # ones); the jumps: 3.5 periods is a gap, 2.5 periods is not
+    # segment lengths that are not multiples of the block (1.6 blocks round up to 2 shorter
+    # ones, which must still be no shorter than the correlation time); the jumps: 3.5
+    # periods is a gap, 2.5 periods is not
     lengths = [8000, 53, 6100, 4020]
     jumps = [3.5, 2.5, 10.0]
     t = [np.arange(lengths[0]) * dt]
@@ -187,7 +189,23 @@ def test_fold_blocks_are_no_shorter_than_the_correlation_time_and_never_cross_a_
         idx = np.flatnonzero(blocks == b)
         assert np.all(np.diff(idx) == 1)
         assert np.unique(seg[idx]).size == 1, "a block straddles a gap"
-        assert idx.size >= length or idx.size == np.sum(seg == seg[idx[0]]), (b, idx.size)
+        whole = idx.size == np.sum(seg == seg[idx[0]])
+        # no shorter than the correlation time (and 3/4 of the length asked for), unless the
+        # block is its whole segment
+        assert (idx.size >= corr and idx.size >= 0.75 * length) or whole, (b, idx.size)
+    # a shorter record (under MAX_BLOCKS correlation lengths), where the correlation length
+    # sets the blocks; its 120-sample segment is 1.8 correlation lengths
+    starts = np.zeros(6000, bool)
+    starts[[0, 3000, 3120]] = True
+    r = _ar1(starts.size, phi, 5)
+    length, _ = cv_block_length(r, starts, 5, 10)
+    corr = correlation_length(r, starts)
+    assert -(-starts.size // MAX_BLOCKS) < corr < 120 / 1.5, corr
+    blocks = contiguous_blocks(starts, length)
+    seg = np.cumsum(starts) - 1
+    for b in np.unique(blocks):
+        idx = np.flatnonzero(blocks == b)
+        assert idx.size >= corr or idx.size == np.sum(seg == seg[idx[0]]), (b, idx.size, corr)
 
 
 def test_a_record_too_short_for_its_correlation_time_is_said_loudly():
