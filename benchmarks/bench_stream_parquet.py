@@ -109,7 +109,7 @@ def main():
             "peak_rss_gb": max(rss0, rss1),
             "streamed_same_samples_s": streamed_small["fit_s"],
             "streamed_vs_in_memory_max_rel_coef_diff": rel,
-            "condition": ref.condition,
+            "condition": float(ref.stats["condition"]),
         }
         # -- the long log --------------------------------------------------------------------
         big = tmp / "long.parquet"
