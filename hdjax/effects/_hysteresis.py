@@ -137,6 +137,25 @@ def _affine_recurrence(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return bb.T.reshape(-1)[:n]
 
 
+def _dahl_column(
+    term: Hysteresis | TwistHysteresis, sig: Signals, torque: SamplesLike | None = None
+) -> Float[Array, "n 1"]:
+    """The Dahl state ([`dahl_state`][hdjax.effects.dahl_state]; the loop of Song et al. Fig. 2)
+    of `term.dahl_driver` as one column, restarted at gaps."""
+    driver = term.dahl_driver(sig, torque)
+    return dahl_state(driver, term.torque_scale, sig.extras.get(SEGMENT_START))[:, None]
+
+
+def _dahl_column_numpy(
+    term: Hysteresis | TwistHysteresis, sig: Signals, torque: SamplesLike | None = None
+) -> Float[np.ndarray, "n 1"]:
+    """NumPy reference of `_dahl_column`."""
+    reset = sig.extras.get(SEGMENT_START)
+    reset = None if reset is None else np.asarray(reset)
+    driver = np.asarray(term.dahl_driver(sig, torque))
+    return dahl_state_numpy(driver, term.torque_scale, reset)[:, None]
+
+
 class Hysteresis(AbstractPathTerm):
     """Hysteresis in twist as a Dahl state driven by the torque path ([`dahl_state`][]).
 
@@ -156,17 +175,9 @@ class Hysteresis(AbstractPathTerm):
         see) takes precedence over `torque`."""
         return sig.extras.get(TORQUE_PATH, torque)
 
-    def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
-        driver = self.dahl_driver(sig, torque)
-        return dahl_state(driver, self.torque_scale, sig.extras.get(SEGMENT_START))[:, None]
-
-    def numpy_columns(
-        self, sig: Signals, torque: SamplesLike | None = None
-    ) -> Float[np.ndarray, "n 1"]:
-        driver = self.dahl_driver(sig, torque)
-        reset = sig.extras.get(SEGMENT_START)
-        reset = None if reset is None else np.asarray(reset)
-        return dahl_state_numpy(np.asarray(driver), self.torque_scale, reset)[:, None]
+    # the Dahl state of `dahl_driver` (shared by both hysteresis terms)
+    columns = _dahl_column
+    numpy_columns = _dahl_column_numpy
 
 
 class TwistHysteresis(AbstractTorqueFreeTerm):
@@ -192,17 +203,9 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
         """The path the Dahl state follows: the measured twist over the compliance."""
         return sig.twist / self.compliance
 
-    def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
-        driver = self.dahl_driver(sig, torque)
-        return dahl_state(driver, self.torque_scale, sig.extras.get(SEGMENT_START))[:, None]
-
-    def numpy_columns(
-        self, sig: Signals, torque: SamplesLike | None = None
-    ) -> Float[np.ndarray, "n 1"]:
-        reset = sig.extras.get(SEGMENT_START)
-        reset = None if reset is None else np.asarray(reset)
-        driver = np.asarray(self.dahl_driver(sig, torque))
-        return dahl_state_numpy(driver, self.torque_scale, reset)[:, None]
+    # the Dahl state of `dahl_driver` (shared by both hysteresis terms)
+    columns = _dahl_column
+    numpy_columns = _dahl_column_numpy
 
 
 def twist_compliance(sig: Signals, torque: SamplesLike, rated_torque: float) -> float:
