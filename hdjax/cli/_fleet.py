@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -44,6 +45,12 @@ WORKER_ENV = {
 
 
 CONNECT_TIMEOUT = 20.0
+
+# a scheduler address: [scheme://]host:port, with Dask's comm schemes
+_SCHEMES = ("tcp", "tls", "ucx", "ws", "wss")
+_ADDRESS = re.compile(
+    r"(?:(?P<scheme>[A-Za-z][A-Za-z0-9+.-]*)://)?(\[[^\]]+\]|[^\s:/\[\]]+):\d{1,5}"
+)
 """Seconds `--scheduler` is tried before the command gives up (`--connect-timeout`)."""
 
 
@@ -100,6 +107,22 @@ class ProgressBar:
             print(file=self.stream)
 
 
+def _not_an_address(address: str, why: str) -> ConfigError:
+    return ConfigError(
+        f"--scheduler {address!r} is not a scheduler address ({why}); give it as "
+        "tcp://HOST:PORT, e.g. tcp://10.0.0.5:8786"
+    )
+
+
+def _check_address(address: str) -> None:
+    """Check `--scheduler` in plain Python, before Dask starts its event loop."""
+    m = _ADDRESS.fullmatch(address)
+    if m is None:
+        raise _not_an_address(address, "expected [scheme://]HOST:PORT")
+    if m["scheme"] is not None and m["scheme"] not in _SCHEMES:
+        raise _not_an_address(address, f"unknown scheme {m['scheme']!r}; one of {_SCHEMES}")
+
+
 def _client(args, n_tasks: int):
     """A Dask client: of the cluster at --scheduler, or of a new local cluster."""
     require("distributed", "fleet")
@@ -109,15 +132,12 @@ def _client(args, n_tasks: int):
     Client, LocalCluster = distributed.Client, distributed.LocalCluster
 
     if args.scheduler:
+        _check_address(args.scheduler)
         timeout = args.connect_timeout or CONNECT_TIMEOUT
         try:
             return Client(args.scheduler, timeout=f"{timeout}s"), None
-        except ValueError as err:  # not an address: no scheme, no port, an unknown scheme
-            raise ConfigError(
-                f"--scheduler {args.scheduler!r} is not a scheduler address "
-                f"({' '.join(str(err).split())}); give it as tcp://HOST:PORT, e.g. "
-                "tcp://10.0.0.5:8786"
-            ) from None
+        except ValueError as err:  # an address Dask still refuses
+            raise _not_an_address(args.scheduler, " ".join(str(err).split())) from None
         except (OSError, TimeoutError) as err:
             raise ConfigError(
                 f"--scheduler {args.scheduler}: cannot connect ({' '.join(str(err).split())}); "
