@@ -104,9 +104,13 @@ class RecordingStream:
         return cls(opener, ", ".join(str(p) for p in paths))
 
 
+MIN_CHUNK = 16
+"""The fewest samples a chunk of a streamed fit may hold (0 means: no chunks)."""
+
+
 def _check_chunk(chunk) -> None:
-    if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 16:
-        raise DataError(f"chunk must be an integer of at least 16 samples, got {chunk!r}")
+    if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < MIN_CHUNK:
+        raise DataError(f"chunk must be an integer of at least {MIN_CHUNK} samples, got {chunk!r}")
 
 
 def peak_abs(stream: RecordingStream, column: str = "current") -> float:

@@ -29,10 +29,9 @@ from .._errors import ConfigError
 from .._features import Signals
 from ..compliance import ComplianceModel
 from ..compliance._lstsq import _compact_column_list, _design
+from ..compliance._stream_fit import MIN_CHUNK
 from ..effects import SEGMENT_START
 from ..effects._hysteresis import _affine_recurrence
-
-MIN_CHUNK = 16
 
 
 def check_chunk(chunk, where: str = "discover chunk") -> int:

@@ -38,6 +38,7 @@ from pathlib import Path
 from .._errors import ConfigError, check_keys, did_you_mean
 from .._io import ColumnMap, read_toml
 from .._joint import Joint
+from ..compliance._stream_fit import MIN_CHUNK
 
 TASKS = ("calibrate", "calibrate+discover", "estimate")
 
@@ -134,8 +135,10 @@ def load_manifest(path) -> Manifest:
         )
     if not 0.05 <= settings["split"] <= 0.9:
         raise ConfigError(f"{path} [fleet] split: must lie in [0.05, 0.9], got {settings['split']}")
-    if settings["chunk"] and settings["chunk"] < 16:
-        raise ConfigError(f"{path} [fleet] chunk: 0 (in memory) or >= 16, got {settings['chunk']}")
+    if settings["chunk"] and settings["chunk"] < MIN_CHUNK:
+        raise ConfigError(
+            f"{path} [fleet] chunk: 0 (in memory) or >= {MIN_CHUNK}, got {settings['chunk']}"
+        )
     model = _merged(MODEL_KEYS, doc.get("model", {}), f"{path} [model]")
     joints_doc = doc.get("joints")
     if not isinstance(joints_doc, list) or not joints_doc:
