@@ -131,11 +131,11 @@ class Signals(eqx.Module):
 
     twist: Float[Array, " n"]
     current: Float[Array, " n"]
+    extras: dict[str, Float[Array, " n"]]
     theta_m: Float[Array, " n"]
     theta_l: Float[Array, " n"]
     omega_m: Float[Array, " n"]
     omega_l: Float[Array, " n"]
-    extras: dict[str, Float[Array, " n"]]
     t: Float[Array, " n"] | None = None
 
     @property
@@ -197,11 +197,11 @@ def derive_signals(
     return Signals(
         twist=twist(recording.theta_m, recording.theta_l, ratio, twist_sign),
         current=jnp.asarray(recording.current, jnp.float64),
+        extras={k: jnp.asarray(v, jnp.float64) for k, v in recording.extras.items()},
         theta_m=jnp.asarray(recording.theta_m, jnp.float64),
         theta_l=jnp.asarray(recording.theta_l, jnp.float64),
         omega_m=diff(recording.t, recording.theta_m),
         omega_l=diff(recording.t, recording.theta_l),
-        extras={k: jnp.asarray(v, jnp.float64) for k, v in recording.extras.items()},
         t=jnp.asarray(recording.t, jnp.float64),
     )
 

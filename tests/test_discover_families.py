@@ -36,7 +36,7 @@ import pytest
 
 import hdjax
 from hdjax import effects, plant
-from hdjax.compliance import signals_from_recording
+from hdjax.compliance import ComplianceModel, signals_from_recording
 from hdjax.discover import DiscoverOptions, LibraryOptions, build_library, discover, refit_structure
 from hdjax.effects import Coulomb, Ripple, Stribeck
 
@@ -155,9 +155,8 @@ def test_ripple_order_comes_from_the_spectrum_of_residual_over_torque(draws):
     k1 = 1.0 / 6.7e4
     resid = 0.03 * k1 * torque * np.sin(2.7 * theta + 0.4) + rng.normal(0, 2e-7, theta.size)
     options = LibraryOptions(families=("ripple:theta_m",), ripple_named_orders_m=())
-    cands, spectra = build_library(
-        sig, torque, resid, ratio=160.0, rated_torque=RATED, existing_keys=(), options=options
-    )
+    model = ComplianceModel.paper(hdjax.Joint(ratio=160.0, rated_torque=RATED))
+    cands, spectra = build_library(sig, torque, resid, model, options=options)
     assert spectra == {}  # the residual ÷ torque spectrum is not the residual's
     peaks = [c.term.order for c in cands if c.origin == "spectrum"]
     assert peaks and abs(peaks[0] - 2.7) < 0.01, peaks

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from hdjax.compliance import Signals
+from hdjax.compliance import ComplianceModel, Signals
 from hdjax.discover import DiscoverOptions, build_library, discover
 from hdjax.discover._folds import (
     GAP_FACTOR,
@@ -249,9 +249,7 @@ def _library_orders(period_fraction: float) -> list[str]:
         sig,
         300.0 * np.sin(2 * np.pi * 3 * t),
         rng.standard_normal(n),
-        ratio=ratio,
-        rated_torque=JOINT.rated_torque,
-        existing_keys=(),
+        ComplianceModel.paper(JOINT),
         options=options,
     )
     return sorted({c.key for c in cands})

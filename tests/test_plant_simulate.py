@@ -132,9 +132,9 @@ def test_vmap_over_parameter_sets():
     gains = plant.default_gains(p)
     s0 = plant.zero_state()
     out = eqx.filter_vmap(lambda q: plant.integrate(q, gains, s0, drive, 5e-4)[1])(batch)
-    assert out.theta_l.shape == (2, 200)
+    assert out.state.theta_l.shape == (2, 200)
     # the heavier link lags more behind the same commanded motion
-    assert not np.allclose(np.asarray(out.theta_l[0]), np.asarray(out.theta_l[1]))
+    assert not np.allclose(np.asarray(out.state.theta_l[0]), np.asarray(out.state.theta_l[1]))
 
 
 def test_hashimoto_preset_runs_the_scenarios():

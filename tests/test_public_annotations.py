@@ -58,6 +58,8 @@ NON_ARRAY: dict[str, set[str]] = {
     # an effect's switch (an effect module, a dict of its parameters, True, None/False), refused
     # otherwise with a ConfigError that lists what is accepted
     "hdjax.plant._params.with_effects": {"more"},
+    # simulate_scenario's keywords, bound to its annotated signature (one list of them)
+    "hdjax.plant._scenarios.simulate_scenarios": {"options"},
 }
 
 # Module prefixes whose findings are tolerated while another change owns them; each must

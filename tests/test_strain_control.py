@@ -10,6 +10,7 @@ import scipy.signal
 
 import hdjax
 from hdjax.pipelines import (
+    TorqueLoop,
     open_loop_error_friction,
     paper_joint,
     sine_tracking,
@@ -67,7 +68,7 @@ def test_eq20_against_simulation_static_loop(constrained_joint):
     # Fig. 15 on the constrained link: while the motor slides, the error sits at +-E_T (eq. 20).
     # Tolerance 1 %: the plant's 1 kHz current loop lags the command by 0.16 ms.
     closed = static_characteristic(
-        feedback=True, joint=constrained_joint, amplitude=10.0, period=1.0, cycles=1.25
+        TorqueLoop(True, constrained_joint), amplitude=10.0, period=1.0, cycles=1.25
     )
     e_t = steady_state_error(hashimoto_controller(), 0.04)
     assert closed.half_width == pytest.approx(e_t, rel=0.01)
@@ -76,7 +77,7 @@ def test_eq20_against_simulation_static_loop(constrained_joint):
     # overshoot (4.4 N m); its median depends on the ramp rate (3.77 here, 3.98 at half the
     # rate): tolerance 10 %.
     opened = static_characteristic(
-        feedback=False, joint=constrained_joint, amplitude=10.0, period=1.0, cycles=1.25
+        TorqueLoop(False, constrained_joint), amplitude=10.0, period=1.0, cycles=1.25
     )
     assert opened.half_width == pytest.approx(4.0, rel=0.10)
     assert opened.half_width_pct == pytest.approx(10.0, rel=0.10)
@@ -169,18 +170,18 @@ def test_loop_with_misaligned_gauges_against_numpy_loop():
 def test_step_open_loop_error_and_friction_for_70pct(constrained_joint):
     # Undamped Coulomb model: the open-loop step sticks after half an oscillation at
     # 2(T_d - N tau_F): error (2 N tau_F - T_d)/T_d = 60 % for 5 N m and N tau_F = 4 N m.
-    res = step_response(feedback=False, joint=constrained_joint, amplitude=5.0, duration=0.1)
+    res = step_response(TorqueLoop(False, constrained_joint), amplitude=5.0, duration=0.1)
     assert res.steady_state_error_pct == pytest.approx(60.0, abs=1.0)
     f70 = open_loop_error_friction(0.70, 5.0)
     assert f70 == pytest.approx(0.0425)
     res70 = step_response(
-        feedback=False, joint=paper_joint(friction=f70, smoothing=SMOOTH), duration=0.1
+        TorqueLoop(False, paper_joint(friction=f70, smoothing=SMOOTH)), duration=0.1
     )
     assert res70.steady_state_error_pct == pytest.approx(70.0, abs=1.0)
 
 
 def test_step_closed_loop_error_and_rise_time(constrained_joint):
-    res = step_response(feedback=True, joint=constrained_joint, amplitude=5.0, duration=0.1)
+    res = step_response(TorqueLoop(True, constrained_joint), amplitude=5.0, duration=0.1)
     e_t_pct = 100 * steady_state_error(hashimoto_controller(), 0.04) / 5.0
     assert abs(res.steady_state_error_pct) <= e_t_pct  # inside the eq. (20) band: 13 %
     assert abs(res.steady_state_error_pct) < 3.0  # "almost zero"
@@ -189,8 +190,8 @@ def test_step_closed_loop_error_and_rise_time(constrained_joint):
 
 
 def test_sine_tracking_improves_with_feedback(constrained_joint):
-    opened = sine_tracking(feedback=False, joint=constrained_joint, duration=0.2)
-    closed = sine_tracking(feedback=True, joint=constrained_joint, duration=0.2)
+    opened = sine_tracking(TorqueLoop(False, constrained_joint), duration=0.2)
+    closed = sine_tracking(TorqueLoop(True, constrained_joint), duration=0.2)
     # Open loop: 4 N m of friction against a 5 N m command - the motor barely moves (paper:
     # "very poor"); closed loop: gain within 15 % of 1 and the error 5x smaller.
     assert opened.gain < 0.3

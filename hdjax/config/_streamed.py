@@ -264,11 +264,11 @@ def build_streamed_dataset(exp, joint: Joint, say) -> StreamedDataset:
         prov.append(f"first {settle:g} s of every recording left out (start-up transient)")
     joined = _joined(train)
     return StreamedDataset(
+        joint=joint,
+        chunk=chunk,
         train=PartStream(joined.opener, joined.label, chunk, train_stats),
         test=test,
-        joint=joint,
         provenance=prov,
-        chunk=chunk,
         train_stats=train_stats,
         test_stats=test_stats,
     )

@@ -42,8 +42,8 @@ import numpy as np
 from .. import effects
 from .._custom_types import ArrayLike, Float
 from .._features import Signals
+from ..compliance import ComplianceModel
 from ..effects import (
-    AbstractTerm,
     Candidate as Candidate,
     CandidateContext,
     harmonic_key as harmonic_key,
@@ -287,23 +287,20 @@ def build_library(
     sig: Signals,
     torque: Float[ArrayLike, " n"],
     residual: Float[ArrayLike, " n"],
+    model: ComplianceModel,
     *,
-    ratio: float,
-    rated_torque: float,
-    existing_keys: tuple[str, ...],
-    existing_terms: tuple[AbstractTerm, ...] = (),
     options: LibraryOptions | None = None,
     extra_columns: tuple[str, ...] = (),
-    twist_sign: float = 1.0,
 ) -> tuple[list[Candidate], dict[str, OrderSpectrum]]:
     """All candidate effects for the present residual, and the order spectra used.
 
     Asks every registered family ([`hdjax.effects.families`][]) for its candidates.
 
     **Arguments:** `sig` (training [`hdjax.compliance.Signals`][]), `torque` (reference),
-    `residual` (twist residual of the present model), `existing_keys` (effects already in the
-    model, not offered again), `options` ([`LibraryOptions`][], default all families),
-    `extra_columns` (names of usable extra columns).
+    `residual` (twist residual of `model`), `model` (the present
+    [`hdjax.compliance.ComplianceModel`][]: its joint gives the ratio, rated torque and twist
+    sign, and its effects are not offered again), `options` ([`LibraryOptions`][], default all
+    families), `extra_columns` (names of usable extra columns).
     """
     options = LibraryOptions() if options is None else options
     spectra: dict[str, OrderSpectrum] = {}
@@ -335,11 +332,11 @@ def build_library(
         sig=sig,
         torque=torque,
         residual=residual,
-        ratio=ratio,
-        rated_torque=rated_torque,
-        twist_sign=twist_sign,
-        existing_keys=tuple(existing_keys),
-        existing_terms=tuple(existing_terms),
+        ratio=model.ratio,
+        rated_torque=model.rated_torque,
+        twist_sign=model.twist_sign,
+        existing_keys=model.effect_keys,
+        existing_terms=tuple(model.effect_terms),
         extra_columns=tuple(extra_columns),
         families=frozenset(options.families),
         options=options,

@@ -463,16 +463,7 @@ def score_candidates(
             del a_full
     with phase("library"):
         cands, spectra = build_library(
-            sig,
-            torque,
-            resid,
-            ratio=model.ratio,
-            rated_torque=model.rated_torque,
-            existing_keys=model.effect_keys,
-            existing_terms=model.effect_terms,
-            options=options.library,
-            extra_columns=extra_columns,
-            twist_sign=model.twist_sign,
+            sig, torque, resid, model, options=options.library, extra_columns=extra_columns
         )
         if not cands:
             return [], spectra, resid
@@ -735,17 +726,17 @@ def _discover(train, test, joint, options, progress) -> Solution:
                 key=cand.key,
                 family=cand.family,
                 term=cand.term,
-                cv_gain=gain,
+                model=model,
+                torque_estimate=est,
                 fold_gains=[float(x) for x in folds_],
                 test=metrics,
                 twist_rms_arcsec=twist_rms,
-                ranking=ranking,
-                spectra=spectra,
-                model=model,
-                torque_estimate=est,
-                stability=stab,
+                cv_gain=gain,
                 cv_torque_rms=new_cv.torque_rms,
                 cv_twist_rms_arcsec=new_cv.twist_rms_arcsec,
+                stability=stab,
+                ranking=ranking,
+                spectra=spectra,
             )
         )
         say(
@@ -822,19 +813,19 @@ def _discover(train, test, joint, options, progress) -> Solution:
     record = DiscoveryRecord(
         baseline_model=baseline_model,
         baseline=base_metrics,
-        baseline_twist_rms_arcsec=base_twist,
         baseline_estimate=base_est,
+        baseline_twist_rms_arcsec=float(base_twist),
+        baseline_cv_torque_rms=base_cv.torque_rms,
+        baseline_cv_twist_rms_arcsec=base_cv.twist_rms_arcsec,
         steps=steps,
         final=final,
         final_spectra=spectra,
         final_ranking=ranking,
+        train_residual_final=resid,
         notes=list(dict.fromkeys(notes)),
         test=test,
-        train_residual_final=resid,
-        baseline_cv_torque_rms=base_cv.torque_rms,
-        baseline_cv_twist_rms_arcsec=base_cv.twist_rms_arcsec,
         unexplained=left,
-        cv_block_samples=block,
+        cv_block_samples=int(block),
     )
     stats = dict(
         n_effects=len(steps),

@@ -37,6 +37,7 @@ from ._strain_experiments import (
     SineResult as SineResult,
     StaticResult as StaticResult,
     StepResponse as StepResponse,
+    TorqueLoop as TorqueLoop,
     open_loop_error_friction as open_loop_error_friction,
     paper_joint as paper_joint,
     sine_tracking as sine_tracking,

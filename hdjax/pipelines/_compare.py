@@ -238,9 +238,6 @@ def compare_methods(
     structure = hc.ComplianceModel.paper(
         joint, per_segment=False, kinematic="harmonic", current_scale=10.0
     )
-    sig_train = _concat([signals(r, joint) for r in train])
-    tq_train = jnp.concatenate([r.torque for r in train])
-    train_all = _join(train)
 
     # The hybrid and joint fits' compliance part. The current polynomial (eq. (8)) stands in
     # for the wave generator's torque, which equals K_t I only at rest: when the joint rings
@@ -260,10 +257,10 @@ def compare_methods(
         params=params,
         structure=structure,
         hybrid_structure=hybrid_structure,
-        sig_train=sig_train,
-        tq_train=tq_train,
+        sig_train=_concat([signals(r, joint) for r in train]),
+        tq_train=jnp.concatenate([r.torque for r in train]),
         train=train,
-        train_all=train_all,
+        train_all=_join(train),
         dynamic=dynamic,
         hidden=hidden,
         steps=steps,

@@ -17,6 +17,7 @@ motor sticks instead of creeping (the plant preset's 0.2 rad/s acts as a viscous
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -30,6 +31,7 @@ from ..strain import (
     IdealTorqueSensor,
     PlantJoint,
     TorqueController,
+    TorqueReference,
     hashimoto_controller,
     simulate_torque_control,
     sine_reference,
@@ -69,18 +71,31 @@ def paper_joint(
     return PlantJoint(params, constrained=constrained)
 
 
-def _controller(feedback: bool, constrained: bool) -> TorqueController:
-    return hashimoto_controller(feedback=feedback, constrained=constrained)
+class TorqueLoop(NamedTuple):
+    """One of the paper's torque loops (eq. (19), Table I gains), which the experiments of
+    Figs. 15-17 drive.
 
+    **Fields:**
 
-def _run(feedback: bool, joint, sensor, reference):
-    """The Table I loop (eq. (19)) on `joint` (default the paper's) read through `sensor`
-    (default the true torque); `reference(sample_period)` gives the desired torque."""
-    joint = paper_joint() if joint is None else joint
-    sensor = IdealTorqueSensor() if sensor is None else sensor
-    ctl = _controller(feedback, joint.constrained)
-    ref = reference(ctl.sample_period)
-    return ctl, ref, simulate_torque_control(ctl, joint, sensor, ref)
+    - `feedback`: close the loop on the measured torque (`True`) or run it open (`False`).
+    - `joint`: the simulated joint (default [`hdjax.pipelines.paper_joint`][]`()`).
+    - `sensor`: what the loop reads (default the true torque, `IdealTorqueSensor`).
+    """
+
+    feedback: bool
+    joint: PlantJoint | None = None
+    sensor: AbstractTorqueSensor | None = None
+
+    def run(
+        self, reference: Callable[[float], TorqueReference]
+    ) -> tuple[TorqueController, TorqueReference, ControlRun]:
+        """The loop's controller, the desired torque `reference(sample_period)` and the
+        simulated run (eqs. (15)-(19))."""
+        joint = paper_joint() if self.joint is None else self.joint
+        sensor = IdealTorqueSensor() if self.sensor is None else self.sensor
+        ctl = hashimoto_controller(feedback=self.feedback, constrained=joint.constrained)
+        ref = reference(ctl.sample_period)
+        return ctl, ref, simulate_torque_control(ctl, joint, sensor, ref)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -98,18 +113,14 @@ class StaticResult(NamedTuple):
 
 
 def static_characteristic(
-    *,
-    feedback: bool,
-    joint: PlantJoint | None = None,
-    sensor: AbstractTorqueSensor | None = None,
-    amplitude: float = 20.0,
-    period: float = 2.0,
-    cycles: float = 1.25,
+    loop: TorqueLoop, *, amplitude: float = 20.0, period: float = 2.0, cycles: float = 1.25
 ) -> StaticResult:
-    """A slow triangle of desired torque, Fig. 15: joint torque against desired torque."""
-    ctl, ref, run = _run(
-        feedback, joint, sensor, lambda ts: triangle_reference(amplitude, period, cycles, ts)
-    )
+    """A slow triangle of desired torque, Fig. 15: joint torque against desired torque.
+
+    **Arguments:** `loop` (the [`TorqueLoop`][] driven), `amplitude` [N·m], `period` [s] and
+    number of `cycles` of the triangle.
+    """
+    _, ref, run = loop.run(lambda ts: triangle_reference(amplitude, period, cycles, ts))
     err = np.asarray(run.reference - run.torque)
     rate = np.asarray(ref.rate)
     settled = np.asarray(ref.t) > 0.25 * period  # past the first rise from rest
@@ -143,18 +154,14 @@ def _crossing(t, y, level):
 
 
 def step_response(
-    *,
-    feedback: bool,
-    joint: PlantJoint | None = None,
-    sensor: AbstractTorqueSensor | None = None,
-    amplitude: float = 5.0,
-    duration: float = 0.2,
-    t_step: float = 0.01,
+    loop: TorqueLoop, *, amplitude: float = 5.0, duration: float = 0.2, t_step: float = 0.01
 ) -> StepResponse:
-    """A torque step, Fig. 16 (the paper does not print the step size; 5 N·m as in Fig. 17)."""
-    ctl, ref, run = _run(
-        feedback, joint, sensor, lambda ts: step_reference(amplitude, duration, ts, t_step)
-    )
+    """A torque step, Fig. 16 (the paper does not print the step size; 5 N·m as in Fig. 17).
+
+    **Arguments:** `loop` (the [`TorqueLoop`][] driven), the step's `amplitude` [N·m], the
+    run's `duration` [s] and the step's time `t_step` [s].
+    """
+    ctl, _, run = loop.run(lambda ts: step_reference(amplitude, duration, ts, t_step))
     t = np.asarray(run.t)
     y = np.asarray(run.torque)
     n_tail = max(1, int(round(0.02 / ctl.sample_period)))
@@ -193,18 +200,14 @@ def fit_sine(t, y, frequency):
 
 
 def sine_tracking(
-    *,
-    feedback: bool,
-    joint: PlantJoint | None = None,
-    sensor: AbstractTorqueSensor | None = None,
-    amplitude: float = 5.0,
-    frequency: float = 20.0,
-    duration: float = 0.3,
+    loop: TorqueLoop, *, amplitude: float = 5.0, frequency: float = 20.0, duration: float = 0.3
 ) -> SineResult:
-    """Tracking of $A\\sin 2\\pi f t$, Fig. 17 (5 N·m, 20 Hz)."""
-    ctl, ref, run = _run(
-        feedback, joint, sensor, lambda ts: sine_reference(amplitude, frequency, duration, ts)
-    )
+    """Tracking of $A\\sin 2\\pi f t$, Fig. 17 (5 N·m, 20 Hz).
+
+    **Arguments:** `loop` (the [`TorqueLoop`][] driven), the sine's `amplitude` [N·m] and
+    `frequency` [Hz], the run's `duration` [s].
+    """
+    _, _, run = loop.run(lambda ts: sine_reference(amplitude, frequency, duration, ts))
     t = np.asarray(run.t)
     keep = t >= 0.05
     err = np.asarray(run.reference - run.torque)[keep]

@@ -33,6 +33,7 @@ from ._strain_compare import compare_feedback
 from ._strain_experiments import (
     FRICTION_PAPER,
     SMOOTHING_STICK,
+    TorqueLoop,
     open_loop_error_friction,
     paper_joint,
     sine_tracking,
@@ -66,6 +67,20 @@ def _pair_figure(title, open_run, closed_run, xlabel, x_of, y_label):
     axes[0].legend(loc="best", fontsize=8)
     fig.suptitle(title)
     return fig
+
+
+def _open_and_closed(experiment, joint, **kw):
+    """One experiment of Figs. 15-17 on `joint`, open loop and closed loop."""
+    return experiment(TorqueLoop(False, joint), **kw), experiment(TorqueLoop(True, joint), **kw)
+
+
+def _open_and_closed_metrics(opened, closed, **fields: str) -> dict[str, float]:
+    """`open_KEY` and `closed_KEY` for each `KEY=field` of an open- and closed-loop result."""
+    return {
+        f"{side}_{key}": getattr(result, field)
+        for side, result in (("open", opened), ("closed", closed))
+        for key, field in fields.items()
+    }
 
 
 def reproduce_figures(out_dir: PathLike, *, quick: bool = False) -> dict:
@@ -135,16 +150,14 @@ def reproduce_figures(out_dir: PathLike, *, quick: bool = False) -> dict:
         }
 
     # -- Fig. 15: static characteristic ------------------------------------------------------------
-    static_kw = dict(joint=joint_c, amplitude=20.0, period=2.0, cycles=1.25)
+    static_kw = dict(amplitude=20.0, period=2.0, cycles=1.25)
     if quick:
         static_kw.update(amplitude=10.0, period=0.5)
-    s_open = static_characteristic(feedback=False, **static_kw)
-    s_closed = static_characteristic(feedback=True, **static_kw)
+    s_open, s_closed = _open_and_closed(static_characteristic, joint_c, **static_kw)
     metrics["fig15"] = {
-        "open_half_width_Nm": s_open.half_width,
-        "open_half_width_pct_rated": s_open.half_width_pct,
-        "closed_half_width_Nm": s_closed.half_width,
-        "closed_half_width_pct_rated": s_closed.half_width_pct,
+        **_open_and_closed_metrics(
+            s_open, s_closed, half_width_Nm="half_width", half_width_pct_rated="half_width_pct"
+        ),
         "eq20_closed_Nm": metrics["loop"]["constrained"]["eq20_E_T_closed_Nm"],
     }
     fig = _pair_figure(
@@ -159,9 +172,8 @@ def reproduce_figures(out_dir: PathLike, *, quick: bool = False) -> dict:
 
     # -- Fig. 16: step response --------------------------------------------------------------------
     f70 = open_loop_error_friction(0.70, 5.0)
-    st_open = step_response(feedback=False, joint=joint_c)
-    st_closed = step_response(feedback=True, joint=joint_c)
-    st_open70 = step_response(feedback=False, joint=paper_joint(friction=f70, smoothing=sm))
+    st_open, st_closed = _open_and_closed(step_response, joint_c)
+    st_open70 = step_response(TorqueLoop(False, paper_joint(friction=f70, smoothing=sm)))
     metrics["fig16"] = {
         "step_Nm": 5.0,
         "open_error_pct": st_open.steady_state_error_pct,
@@ -185,13 +197,9 @@ def reproduce_figures(out_dir: PathLike, *, quick: bool = False) -> dict:
     # -- Fig. 17: 5 N·m, 20 Hz sine ----------------------------------------------------------------
     # quick: every run 0.2 s long, so that runs of one sensor type share one compiled loop
     sine_kw = dict(duration=0.2 if quick else 0.3)
-    sn_open = sine_tracking(feedback=False, joint=joint_c, **sine_kw)
-    sn_closed = sine_tracking(feedback=True, joint=joint_c, **sine_kw)
+    sn_open, sn_closed = _open_and_closed(sine_tracking, joint_c, **sine_kw)
     metrics["fig17"] = {
-        "open_rms_error_Nm": sn_open.rms_error,
-        "open_gain": sn_open.gain,
-        "closed_rms_error_Nm": sn_closed.rms_error,
-        "closed_gain": sn_closed.gain,
+        **_open_and_closed_metrics(sn_open, sn_closed, rms_error_Nm="rms_error", gain="gain"),
         "closed_phase_deg": sn_closed.phase_deg,
     }
     fig = _pair_figure(
@@ -206,8 +214,8 @@ def reproduce_figures(out_dir: PathLike, *, quick: bool = False) -> dict:
 
     # -- free link: step and sine ----------------------------------------------------------------
     free = paper_joint(constrained=False, smoothing=sm)
-    fs = step_response(feedback=True, joint=free)
-    fsn = sine_tracking(feedback=True, joint=free, **sine_kw)
+    fs = step_response(TorqueLoop(True, free))
+    fsn = sine_tracking(TorqueLoop(True, free), **sine_kw)
     metrics["free_link"] = {
         "closed_step_error_pct": fs.steady_state_error_pct,
         "closed_step_rise_time_ms": 1e3 * fs.rise_time,

@@ -27,7 +27,7 @@ import numpy as np
 from .. import network as nw
 from .._errors import ConfigError, DataError
 from ..compliance import RecordingStream, estimate_torque
-from ..compliance._stream_fit import SMOOTH_HALF_WINDOW, windows
+from ..compliance._stream_fit import SMOOTH_HALF_WINDOW, _arrays, _recording, windows
 from ..network._kalman import PAPER_P0, PAPER_Q, PAPER_R, kalman_filter
 
 FIGURE_LIMIT = 6000
@@ -234,8 +234,6 @@ def estimate_network_streamed(net, joint, stream: RecordingStream, n: int):
 
 def head(stream: RecordingStream, n: int):
     """The first `n` samples of a stream's first recording (a [`hdjax.Recording`][])."""
-    from ..compliance._stream_fit import _arrays, _recording
-
     parts, got = [], 0
     for chunks in stream:
         for c in chunks:

@@ -120,8 +120,8 @@ def simulate_signals(
         xs = (chunks.theta_ref, chunks.omega_ref, chunks.alpha_ref, chunks.gravity, chunks.external)
         _, out = jax.lax.scan(_window, s0, xs)
         out = jax.tree.map(lambda x: x.reshape(-1), out)
-    twist = out.theta_m / params.ratio - out.theta_l
-    return out.sensor_torque, out.current, twist, -out.theta_l
+    twist = out.state.theta_m / params.ratio - out.state.theta_l
+    return out.sensor_torque, out.state.current, twist, -out.state.theta_l
 
 
 def _scales(params: PlantParams):

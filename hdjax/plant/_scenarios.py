@@ -17,7 +17,9 @@ All loads scale with `params.rated_torque`, so the same scenarios run on the Has
 
 from __future__ import annotations
 
+import inspect
 import math
+import types
 from collections.abc import Mapping, Sequence
 
 import jax
@@ -227,48 +229,53 @@ def simulate_scenario(
     )
 
 
+def _scenario_options(options: dict) -> types.SimpleNamespace:
+    """`simulate_scenario`'s keywords with its defaults filled in (its signature is the one list
+    of them); a keyword it does not take is a `TypeError`, as in a call."""
+    try:
+        bound = inspect.signature(simulate_scenario).bind("", key=None, **options)
+    except TypeError as err:
+        raise TypeError(f"simulate_scenarios: {err} (it takes simulate_scenario's)") from None
+    bound.apply_defaults()
+    return types.SimpleNamespace(**bound.arguments)
+
+
 def simulate_scenarios(
-    names: Sequence[str] = SCENARIOS,
-    *,
-    key: PRNGKeyArray,
-    duration: float = 60.0,
-    effects: Mapping | None = None,
-    params: PlantParams | None = None,
-    dt: float = 5e-4,
-    output_period: float = 5e-4,
-    sensors: SensorConfig | None = None,
-    truth: bool = False,
-    memory_limit: int = DEFAULT_MEMORY_LIMIT,
+    names: Sequence[str] = SCENARIOS, *, key: PRNGKeyArray, **options
 ) -> dict[str, Recording]:
     """Several scenarios at once, run as one `vmap`-ed batch (one compilation, one loop).
 
-    Same arguments as `simulate_scenario`, with `names` a sequence of scenario names; scenario
-    `j` gets the key `jax.random.split(key, len(names))[j]` and the same recording as
+    Takes the keyword arguments of [`hdjax.plant.simulate_scenario`][] (`duration`, `effects`,
+    `params`, `dt`, `output_period`, `sensors`, `truth`, `memory_limit`, with the same
+    defaults), with `names` a sequence of scenario names; scenario `j` gets the key
+    `jax.random.split(key, len(names))[j]` and the same recording as
     `simulate_scenario(names[j], key=that_key, ...)`.
 
     **Returns:** a dict name -> [`hdjax.Recording`][].
     """
     names = tuple(names)
-    params = _prepare(names, params, effects, duration, dt)
-    stride = output_period / dt
+    o = _scenario_options(options)
+    params = _prepare(names, o.params, o.effects, o.duration, o.dt)
+    stride = o.output_period / o.dt
     if not (abs(stride - round(stride)) < 1e-9 and round(stride) >= 1):
         raise ConfigError(
-            f"output_period {output_period:g} s must be a positive multiple of dt {dt:g} s"
+            f"output_period {o.output_period:g} s must be a positive multiple of dt {o.dt:g} s"
         )
     stride = int(round(stride))
-    n_steps = int(round(duration / dt))
+    n_steps = int(round(o.duration / o.dt))
     n_out = n_steps // stride
-    check_memory(n_steps, n_out, batch=len(names), limit=memory_limit)
+    check_memory(n_steps, n_out, batch=len(names), limit=o.memory_limit)
     keys = jax.random.split(key, len(names))
     drives = []
     for name, k in zip(names, keys):
-        d = scenario_drive(name, params, duration=duration, dt=dt, key=jax.random.fold_in(k, 0))
+        k0 = jax.random.fold_in(k, 0)
+        d = scenario_drive(name, params, duration=o.duration, dt=o.dt, key=k0)
         drives.append(jax.tree.map(lambda x: x[: n_out * stride], d))
     stack = lambda xs: jax.tree.map(lambda *a: jnp.stack(a), *xs)
     drives_b = spread_batch(stack(drives))  # over the local devices, when there are several
-    _, outs = _integrate_batch(params, default_gains(params), None, drives_b, dt, stride, 1)
-    t = np.arange(n_out) * output_period
-    sensors = SensorConfig() if sensors is None else sensors
+    _, outs = _integrate_batch(params, default_gains(params), None, drives_b, o.dt, stride, 1)
+    t = np.arange(n_out) * o.output_period
+    sensors = SensorConfig() if o.sensors is None else o.sensors
     result = {}
     for j, (name, k) in enumerate(zip(names, keys)):
         out = jax.tree.map(lambda x: x[j], outs)
@@ -279,8 +286,8 @@ def simulate_scenarios(
             t,
             sensors=sensors,
             key=jax.random.fold_in(k, 1),
-            truth=truth,
-            theta_ref=drives[j].theta_ref[::stride] if truth else None,
+            truth=o.truth,
+            theta_ref=drives[j].theta_ref[::stride] if o.truth else None,
             source=f"scenario:{name}",
         )
     return result

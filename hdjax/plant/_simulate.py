@@ -65,15 +65,21 @@ class Drive(eqx.Module):
 
 
 class Outputs(eqx.Module):
-    """Noiseless signals at the output samples (state frame)."""
+    """Noiseless signals at the output samples (state frame).
 
-    theta_m: Float[Array, " n"]
-    theta_l: Float[Array, " n"]
-    current: Float[Array, " n"]
+    **Arguments:**
+
+    - `state`: the [`hdjax.plant.PlantState`][] at each output sample (each leaf of shape `(n,)`).
+    - `joint_torque`: the flexspline torque $T_J$ [N·m].
+    - `sensor_torque`: what a torque sensor on the output shaft reads, $T_J$ less the output
+      friction [N·m].
+    - `load`: the external load torque on the link [N·m].
+    - `kinematic_error`: the reducer's kinematic error [rad].
+    """
+
+    state: PlantState
     joint_torque: Float[Array, " n"]
     sensor_torque: Float[Array, " n"]
-    z: Float[Array, " n"]
-    temperature: Float[Array, " n"]
     load: Float[Array, " n"]
     kinematic_error: Float[Array, " n"]
 
@@ -87,13 +93,9 @@ def load_torque(drive_k, theta_l):
 def _measure(params: PlantParams, state: PlantState, load, inv) -> Outputs:
     t_j = flexspline_torque(params, state, inv=inv)
     return Outputs(
-        theta_m=state.theta_m,
-        theta_l=state.theta_l,
-        current=state.current,
+        state=state,
         joint_torque=t_j,
         sensor_torque=t_j - output_friction(params, state.omega_l, inv=inv),
-        z=state.z,
-        temperature=state.temperature,
         load=load,
         kinematic_error=kinematic_error(params, state.theta_m, state.theta_l),
     )
@@ -331,20 +333,21 @@ def check_memory(n_steps: int, n_out: int, *, batch=1, limit=DEFAULT_MEMORY_LIMI
 def _sense(out: Outputs, t, key, motor_q, load_q, i_sigma, i_hold, tq_sigma, temp_q, noise):
     k1, k2 = jax.random.split(key)
     # recorded angles count the other way round (see _dynamics): twist_rec = theta_m/N - theta_l
-    th_m, th_l = -out.theta_m, -out.theta_l
+    th_m, th_l = -out.state.theta_m, -out.state.theta_l
     if noise:
         th_m = jnp.floor(th_m / motor_q) * motor_q
         th_l = jnp.floor(th_l / load_q) * load_q
     # current: a fresh noisy sample every driver period, held in between
     n = t.shape[0]
     idx = (jnp.arange(n) // i_hold) * i_hold
-    cur = out.current[idx]
+    cur = out.state.current[idx]
     if noise:
         cur = cur + i_sigma * jax.random.normal(k1, (n,), jnp.float64)[idx]
         tq = out.sensor_torque + tq_sigma * jax.random.normal(k2, (n,), jnp.float64)
-        temp = jnp.round(out.temperature / temp_q) * temp_q if temp_q > 0 else out.temperature
+        temp = out.state.temperature
+        temp = jnp.round(temp / temp_q) * temp_q if temp_q > 0 else temp
     else:
-        tq, temp = out.sensor_torque, out.temperature
+        tq, temp = out.sensor_torque, out.state.temperature
     return th_m, th_l, cur, tq, temp
 
 
@@ -390,13 +393,13 @@ def to_recording(
         extras.update(
             true_torque=out.sensor_torque,
             true_joint_torque=out.joint_torque,
-            true_current=out.current,
-            true_theta_m=-out.theta_m,
-            true_theta_l=-out.theta_l,
-            true_hysteresis=out.z,
+            true_current=out.state.current,
+            true_theta_m=-out.state.theta_m,
+            true_theta_l=-out.state.theta_l,
+            true_hysteresis=out.state.z,
             true_kinematic_error=out.kinematic_error,
             true_load=-out.load,
-            true_temperature=out.temperature,
+            true_temperature=out.state.temperature,
         )
         if theta_ref is not None:
             extras["reference_theta_l"] = -theta_ref

@@ -177,9 +177,9 @@ def build_wrench_reference(
         f"{holds.describe()}"
     )
     return WrenchReference(
-        torque=tau_model + ext,
-        external=ext,
         model=tau_model,
+        external=ext,
+        torque=tau_model + ext,
         fresh=fresh,
         holds=holds,
         offset=offset,

@@ -30,11 +30,6 @@ _OPTIMIZERS: dict[str, Callable[[float], optax.GradientTransformation]] = {
 }
 
 
-def _mse(trainable, network, z, t):
-    net = eqx.tree_at(lambda n: (n.weights, n.biases), network, trainable)
-    return jnp.mean((net.normalised(z) - t) ** 2)
-
-
 @eqx.filter_jit
 def _train(network, z, t, zv, tv, key, lr, target, factory, batch, eval_every, n_checks):
     opt = factory(lr)
@@ -67,12 +62,18 @@ def _train(network, z, t, zv, tv, key, lr, target, factory, batch, eval_every, n
     return checked_loop(_chunk, (trainable, state), loss0, n_checks, short, floor=1.0)
 
 
+def _mse(trainable, network, z, t):
+    """The loss: mean squared error of the standardised torque."""
+    net = eqx.tree_at(lambda n: (n.weights, n.biases), network, trainable)
+    return jnp.mean((net.normalised(z) - t) ** 2)
+
+
 def train_optax(
     network: Network,
     x: Real[ArrayLike, "m n_features"],
     y: Real[ArrayLike, " m"],
     *,
-    learning_rate: float,
+    learning_rate: float = 1e-3,
     steps: int,
     key: PRNGKeyArray,
     optimizer: str | Callable[[float], optax.GradientTransformation] = "adam",
@@ -89,7 +90,8 @@ def train_optax(
 
     - `network`: an initialised [`hdjax.network.Network`][].
     - `x`, `y`: training inputs `(m, n_features)` and torques `(m,)` [N·m].
-    - `learning_rate`: the optimiser's step size (named in the message if training diverges).
+    - `learning_rate`: the optimiser's step size (default 1e-3; named in the message if
+      training diverges).
     - `steps`: maximum number of optimiser steps (rounded up to `eval_every`).
     - `key`: PRNG key for minibatch sampling (keyword-only, no default).
     - `optimizer`: `"adam"`, `"adamw"`, `"sgd"` or a function from the learning rate
