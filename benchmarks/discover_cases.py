@@ -235,7 +235,8 @@ def _two(scenario, params, duration):
 
 def lara8_splits():
     """Joint 3 of the LARA8 log under three TRAIN/TEST splits."""
-    from hdjax._io import ColumnMap, load_recording, read_toml
+    from hdjax._formats import load_recording
+    from hdjax._io import ColumnMap, read_toml
     from hdjax.discover._config import load_discover_config
 
     cfg_path = ROOT / "experiments" / "lara8_discover.toml"

@@ -42,7 +42,8 @@ CONFIG = ROOT / "experiments" / "lara8_discover.toml"
 
 def load():
     """The joint-3 recording, the joint and the discover settings of `experiments/`."""
-    from hdjax._io import ColumnMap, load_recording, read_toml
+    from hdjax._formats import load_recording
+    from hdjax._io import ColumnMap, read_toml
     from hdjax.discover._config import load_discover_config
 
     _, _, joint, cfg, _ = load_discover_config(CONFIG)

@@ -51,11 +51,11 @@ from ._features import (  # noqa: E402
     smoothed_velocity as smoothed_velocity,
     twist as twist,
 )
+from ._formats import load_recording as load_recording  # noqa: E402
 from ._io import (  # noqa: E402
     ColumnMap as ColumnMap,
     load_csv as load_csv,
     load_npz as load_npz,
-    load_recording as load_recording,
     save_csv as save_csv,
     save_npz as save_npz,
 )

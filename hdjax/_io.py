@@ -433,24 +433,6 @@ def load_npz(
     return _build(table, columns, str(path), check_units)
 
 
-def load_recording(
-    path: PathLike, columns: ColumnMap | None = None, *, check_units: bool = True
-) -> Recording:
-    """Load a recording chosen by the file's suffix: `.csv`, `.npz`, or a format of
-    `hdjax._formats` (Parquet, HDF5 / MATLAB v7.3, MCAP)."""
-    if Path(path).is_dir():
-        raise DataError(f"{path}: is a folder; give a recording file (.csv, .npz, ...)")
-    suffix = Path(path).suffix.lower()
-    if suffix == ".csv":
-        return load_csv(path, columns, check_units=check_units)
-    if suffix == ".npz":
-        return load_npz(path, columns, check_units=check_units)
-    # Parquet, HDF5, MATLAB v7.3, MCAP; _formats imports this module at its top: a cycle
-    from ._formats import load as load_other
-
-    return load_other(path, columns, check_units=check_units)
-
-
 # ---------------------------------------------------------------------------------------------
 # Writing
 

@@ -221,7 +221,7 @@ def test_chunk_must_be_an_integer(bad):
 
 
 def test_cli_rejects_a_short_chunk(tmp_path, capsys):
-    from hdjax.discover._cli import cli_main
+    from hdjax.cli._discover import cli_main
 
     rec = synthetic_recording(3, n=200)
     train, test = tmp_path / "train.csv", tmp_path / "test.csv"

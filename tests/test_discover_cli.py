@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import hdjax
-from hdjax.discover import cli_main
+from hdjax.cli._discover import cli_main
 
 from .discover_data import synthetic_recording
 

@@ -12,8 +12,9 @@ import json
 import numpy as np
 import pytest
 
+from hdjax.cli._discover import cli_main
 from hdjax.compliance import ColumnTimesTorque, Coulomb, Hysteresis
-from hdjax.discover import DiscoverOptions, cli_main, discover, refit_structure
+from hdjax.discover import DiscoverOptions, discover, refit_structure
 
 from .conftest import REPO
 from .discover_data import JOINT, synthetic_recording

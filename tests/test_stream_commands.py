@@ -54,7 +54,12 @@ def _no_whole_loads(monkeypatch):
     def refuse(*a, **k):
         raise AssertionError("a streamed run loaded a whole recording")
 
-    for target in ("hdjax.config._dataset._load", "hdjax._formats.load", "hdjax._io.load_csv"):
+    for target in (
+        "hdjax.config._dataset._load",
+        "hdjax._formats.load",
+        "hdjax._formats.load_csv",
+        "hdjax._io.load_csv",
+    ):
         monkeypatch.setattr(target, refuse)
 
 

@@ -55,7 +55,7 @@ def _full_parser(name: str, sub: argparse.ArgumentParser) -> argparse.ArgumentPa
         return sub
     import importlib
 
-    for module in (f"hdjax.cli._{name}", f"hdjax.{name}._cli"):
+    for module in (f"hdjax.cli._{name}",):
         try:
             mod = importlib.import_module(module)
         except ImportError:

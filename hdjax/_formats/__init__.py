@@ -23,8 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
+from .._custom_types import PathLike
 from .._errors import DataError
-from .._io import _build
+from .._io import ColumnMap, _build, load_csv, load_npz
+from .._recording import Recording
+from ._columns import as_float_column as as_float_column, require as require
+from ._mapper import ChunkMapper, needed_sources
 
 SUFFIXES = {
     ".csv": "_csv",
@@ -39,17 +43,6 @@ SUFFIXES = {
 """File suffix -> reader module."""
 
 EXTRAS = {"_parquet": ("pyarrow", "parquet"), "_hdf5": ("h5py", "hdf5"), "_mcap": ("mcap", "mcap")}
-
-
-def require(package: str, extra: str):
-    """Import an optional dependency, or raise a one-line `DataError` naming the extra."""
-    try:
-        return importlib.import_module(package)
-    except ImportError:
-        raise DataError(
-            f"reading this format needs the {package!r} package; install it with "
-            f"pip install 'hdjax[{extra}]'"
-        ) from None
 
 
 def reader(path):
@@ -85,8 +78,6 @@ def load(path, columns=None, *, check_units: bool = True):
 
     **Returns:** a [`hdjax.Recording`][].
     """
-    from ._mapper import needed_sources  # _mapper imports this package's helpers: a cycle
-
     path = Path(path)
     mod = reader(path)
     _check_exists(path)
@@ -104,8 +95,6 @@ def iter_recordings(path, columns=None, *, chunk: int, check_units: bool = True)
     file's first sample), and the time column is checked to increase across chunk boundaries,
     so concatenating the chunks gives the recording [`load`][] returns.
     """
-    from ._mapper import ChunkMapper, needed_sources  # a cycle (see load)
-
     if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 2:
         raise DataError(f"chunk must be an integer >= 2 samples, got {chunk!r}")
     path = Path(path)
@@ -142,14 +131,17 @@ def _at_least_two(tables):
         yield held
 
 
-def as_float_column(name: str, values, source: str) -> np.ndarray:
-    """A 1-D float64 column (a `(n, 1)` or `(1, n)` MATLAB vector is flattened)."""
-    arr = np.asarray(values)
-    if arr.ndim == 2 and 1 in arr.shape:
-        arr = arr.reshape(-1)
-    if arr.ndim != 1:
-        raise DataError(f"{source}: column {name!r} must be one-dimensional, got shape {arr.shape}")
-    try:
-        return arr.astype(np.float64, copy=False)
-    except (TypeError, ValueError):
-        raise DataError(f"{source}: column {name!r} is not numeric (dtype {arr.dtype})") from None
+def load_recording(
+    path: PathLike, columns: ColumnMap | None = None, *, check_units: bool = True
+) -> Recording:
+    """Load a recording chosen by the file's suffix: `.csv` ([`hdjax.load_csv`][]), `.npz`
+    ([`hdjax.load_npz`][]), or Parquet, HDF5 / MATLAB v7.3 or MCAP through their readers (the
+    column map applied as for CSV)."""
+    if Path(path).is_dir():
+        raise DataError(f"{path}: is a folder; give a recording file (.csv, .npz, ...)")
+    suffix = Path(path).suffix.lower()
+    if suffix == ".csv":
+        return load_csv(path, columns, check_units=check_units)
+    if suffix == ".npz":
+        return load_npz(path, columns, check_units=check_units)
+    return load(path, columns, check_units=check_units)

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import DataError
-from . import as_float_column, require
+from ._columns import as_float_column, require
 
 _MATLAB_INTERNAL = ("#refs#", "#subsystem#")
 

@@ -7,6 +7,7 @@ import numpy as np
 from .._errors import DataError
 from .._io import ColumnMap, ColumnSpec, no_source_error, schema_spec
 from .._recording import SIGNAL_COLUMNS, make_recording
+from ._columns import as_float_column
 
 
 def _plan(columns: ColumnMap | None, available: list[str], source: str) -> dict[str, ColumnSpec]:
@@ -77,8 +78,6 @@ class ChunkMapper:
         return x * spec.scale + float(spec.offset)
 
     def __call__(self, table: dict[str, np.ndarray]):
-        from . import as_float_column  # the package imports this module: a cycle
-
         cols = {
             name: self._apply(name, spec, table[spec.source]) for name, spec in self.plan.items()
         }

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import DataError
-from . import require
+from ._columns import require
 
 
 def _flatten(obj, prefix: str, out: dict) -> None:

@@ -14,7 +14,7 @@ import numpy as np
 
 from .._errors import DataError
 from .._io import file_mode
-from . import as_float_column, require
+from ._columns import as_float_column, require
 
 
 def _pq():

@@ -27,7 +27,7 @@ _MODULES = {
     "run": "hdjax.cli._run",
     "sweep": "hdjax.cli._sweep",
     "estimate": "hdjax.cli._estimate",
-    "discover": "hdjax.discover._cli",
+    "discover": "hdjax.cli._discover",
     "bench": "hdjax.cli._bench",
     "convert": "hdjax.cli._convert",
     "fleet": "hdjax.cli._fleet",

@@ -7,7 +7,8 @@ from pathlib import Path
 # compliance.estimate_torque is looked up at each call (a test stops the command there)
 from .. import compliance
 from .._errors import ConfigError, DataError, ModelMismatchError, UnitWarning
-from .._io import atomic_write_bytes, csv_bytes, load_recording
+from .._formats import load_recording
+from .._io import atomic_write_bytes, csv_bytes
 from .._joint import load_joint
 from .._memory import check_read_memory
 from .._metrics import error_metrics

@@ -29,12 +29,13 @@ import numpy as np
 
 from .. import plant
 from .._errors import ConfigError
-from .._io import ColumnMap, load_csv, load_npz, load_recording
+from .._formats import load_recording
+from .._io import ColumnMap, load_csv, load_npz
 from .._joint import Joint
 from .._recording import Recording, make_recording
 from ..compliance import paper_knots
 from ..reference import describe_column_reference, load_with_reference
-from ._load import Experiment
+from ._load import Experiment, column_map, resolve_path
 from ._schema import joint_of
 from ._streamed import StreamedDataset, build_streamed_dataset, streams
 
@@ -127,21 +128,6 @@ def _drop_settling(ds: Dataset, settle: float) -> Dataset:
 
 # ---------------------------------------------------------------------------------------------
 # Files
-
-
-def column_map(data: dict) -> ColumnMap:
-    """The [`hdjax.ColumnMap`][] of a `[data]` table (its `columns` and `extras`)."""
-    table = {"columns": data.get("columns") or {}}
-    if data.get("extras"):
-        table["extras"] = data["extras"]
-    if data.get("encoding") not in (None, "utf-8"):
-        table["encoding"] = data["encoding"]
-    return ColumnMap.from_dict(table, where="[data]")
-
-
-def resolve_path(exp, name: str) -> Path:
-    p = Path(name).expanduser()
-    return p if p.is_absolute() else (exp.base_dir / p)
 
 
 def _load(path: Path, fmt: str, cmap: ColumnMap, check_units: bool, exp) -> tuple:

@@ -11,7 +11,7 @@ from typing import Any
 
 from .._custom_types import PathLike
 from .._errors import ConfigError
-from .._io import TOML_HINT, read_text
+from .._io import TOML_HINT, ColumnMap, read_text
 from ._schema import apply_setting, resolve
 
 _POSITION = re.compile(r"^(?P<msg>.*?)\s*\(at line (?P<line>\d+), column (?P<col>\d+)\)\s*$")
@@ -29,6 +29,22 @@ class Experiment(dict):
     @property
     def base_dir(self) -> Path:
         return self.path.parent if self.path is not None else Path.cwd()
+
+
+def column_map(data: dict) -> ColumnMap:
+    """The [`hdjax.ColumnMap`][] of a `[data]` table (its `columns` and `extras`)."""
+    table = {"columns": data.get("columns") or {}}
+    if data.get("extras"):
+        table["extras"] = data["extras"]
+    if data.get("encoding") not in (None, "utf-8"):
+        table["encoding"] = data["encoding"]
+    return ColumnMap.from_dict(table, where="[data]")
+
+
+def resolve_path(exp: Experiment, name: str) -> Path:
+    """A data path of the experiment: `~` expanded, a relative path taken from its folder."""
+    p = Path(name).expanduser()
+    return p if p.is_absolute() else (exp.base_dir / p)
 
 
 def parse_toml(text: str, *, where: str) -> dict:

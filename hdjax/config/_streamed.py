@@ -26,6 +26,7 @@ from .._formats import iter_recordings
 from .._joint import Joint
 from ..compliance import RecordingStream
 from ..compliance._stream_fit import _arrays, _recording
+from ._load import column_map, resolve_path
 from ._saved_model import ratio_mismatch
 
 
@@ -211,8 +212,6 @@ def build_streamed_dataset(exp, joint: Joint, say) -> StreamedDataset:
     **Raises:** [`hdjax.ConfigError`][] for settings that need whole recordings (a wrench
     reference), [`hdjax.DataError`][] for a missing file or column.
     """
-    from ._dataset import column_map, resolve_path  # _dataset dispatches here: a cycle
-
     data = exp["data"]
     chunk = int(exp["fit"]["chunk"])
     if data["reference"]["kind"] != "column":

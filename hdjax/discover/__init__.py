@@ -1,7 +1,6 @@
 """The residual loop: find the residual, trace it to a physical effect, add it, report."""
 
 from ._checks import apparent_ratio as apparent_ratio, check_inputs as check_inputs
-from ._cli import build_parser as build_parser, cli_main as cli_main, run as run
 from ._library import (
     FAMILIES as FAMILIES,
     Candidate as Candidate,

@@ -15,7 +15,8 @@ import numpy as np
 
 from .._cache import enable_compilation_cache
 from .._errors import HdjaxError
-from .._io import ColumnMap, load_recording
+from .._formats import load_recording
+from .._io import ColumnMap
 from .._joint import Joint
 from .._metrics import error_metrics
 from ..compliance import (

@@ -10,7 +10,8 @@ import numpy as np
 
 from .._custom_types import PathLike
 from .._errors import ConfigError
-from .._io import ColumnMap, ColumnSpec, load_recording
+from .._formats import load_recording
+from .._io import ColumnMap, ColumnSpec
 from .._recording import Recording
 from ._builder import WrenchReference, build_wrench_reference
 from ._spec import check_reference, needed_columns

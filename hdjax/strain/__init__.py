@@ -71,8 +71,8 @@ from ._stability import (
 )
 
 # The experiments and the figure reproduction moved to `hdjax.pipelines` (they put the sensor, the
-# controller and the plant together); the old `hdjax.strain.X` names still resolve, on access
-# only, so that importing this package does not import the pipelines above it.
+# controller and the plant together, above this package); the old `hdjax.strain.X` names say
+# where they went.
 _MOVED_TO_PIPELINES = (
     "FRICTION_PAPER",
     "CaseResult",
@@ -92,7 +92,5 @@ _MOVED_TO_PIPELINES = (
 
 def __getattr__(name: str):
     if name in _MOVED_TO_PIPELINES:
-        from .. import pipelines  # above this package: imported on access, not at import time
-
-        return getattr(pipelines, name)
+        raise AttributeError(f"hdjax.strain.{name} moved: use hdjax.pipelines.{name}")
     raise AttributeError(f"module 'hdjax.strain' has no attribute {name!r}")

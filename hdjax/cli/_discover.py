@@ -19,15 +19,17 @@ import equinox as eqx
 
 from .. import __version__
 from .._errors import DataError, HdjaxError
-from .._io import load_recording, read_toml
+from .._formats import load_recording
+from .._io import read_toml
 from .._joint import load_joint
 from .._memory import check_read_memory
+from ..discover import _loop  # `_loop.discover` looked up at call time, where a test stops it
+from ..discover._checks import check_inputs
+from ..discover._chunked import check_chunk
+from ..discover._config import load_discover_config
+from ..discover._report import write_report
 from ..report import ResultDir
-from . import _loop  # `_loop.discover` looked up at call time, where a test stops the command
-from ._checks import check_inputs
-from ._chunked import check_chunk
-from ._config import load_discover_config
-from ._report import write_report
+from ._common import Parser, ParserExit, UsageError
 
 HELP = "residual loop: find, trace and add missing effects, report the torque error before/after"
 
@@ -44,8 +46,6 @@ def command(args: argparse.Namespace, parser=None) -> int:
 
 def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
     if parser is None:
-        from ..cli._common import Parser  # hdjax.cli imports this module: a cycle
-
         parser = Parser(prog="hdjax discover")
     p = parser
     p.description = (
@@ -208,8 +208,6 @@ def cli_main(argv: list[str] | None = None) -> int:
     The same as `hdjax discover ...` (`hdjax.cli.main(["discover", ...])`), with the messages
     prefixed `hdjax discover: error:`.
     """
-    from ..cli._common import ParserExit, UsageError  # hdjax.cli imports this module: a cycle
-
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
     try:
         args = build_parser().parse_strict(argv)
