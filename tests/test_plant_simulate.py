@@ -178,6 +178,13 @@ def test_unknown_scenario_and_bad_options():
         plant.simulate_scenario("slow", duration=0.1)  # key is keyword-only and required
     with pytest.raises(hdjax.ConfigError, match="encoder_bits_motor"):
         plant.SensorConfig(encoder_bits_motor=0)
+    # the batch takes simulate_scenario's keywords, checked before anything runs
+    with pytest.raises(TypeError, match="simulate_scenarios: .*'durations'"):
+        plant.simulate_scenarios(key=jax.random.key(0), durations=0.1)
+    with pytest.raises(TypeError, match="simulate_scenarios: .*'name'"):
+        plant.simulate_scenarios(["slow"], key=jax.random.key(0), name="fast")
+    with pytest.raises(hdjax.ConfigError, match="multiple of dt"):
+        plant.simulate_scenarios(["slow"], key=jax.random.key(0), output_period=7e-4)
 
 
 def test_plot_scenario_writes_png(scenarios, tmp_path):
