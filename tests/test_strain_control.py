@@ -9,14 +9,7 @@ import scipy.linalg
 import scipy.signal
 
 import hdjax
-from hdjax.pipelines import (
-    TorqueLoop,
-    open_loop_error_friction,
-    paper_joint,
-    sine_tracking,
-    static_characteristic,
-    step_response,
-)
+from hdjax import pipelines as hp
 from hdjax.strain import (
     IdealJoint,
     IdealTorqueSensor,
@@ -40,7 +33,7 @@ SMOOTH = 1e-2
 
 @pytest.fixture(scope="session")
 def constrained_joint():
-    return paper_joint(constrained=True, smoothing=SMOOTH)
+    return hp.paper_joint(constrained=True, smoothing=SMOOTH)
 
 
 def test_table_i_controller_and_eq18_coefficients():
@@ -67,8 +60,8 @@ def test_eq20_closed_form_values():
 def test_eq20_against_simulation_static_loop(constrained_joint):
     # Fig. 15 on the constrained link: while the motor slides, the error sits at +-E_T (eq. 20).
     # Tolerance 1 %: the plant's 1 kHz current loop lags the command by 0.16 ms.
-    closed = static_characteristic(
-        TorqueLoop(True, constrained_joint), amplitude=10.0, period=1.0, cycles=1.25
+    closed = hp.static_characteristic(
+        hp.TorqueLoop(True, constrained_joint), amplitude=10.0, period=1.0, cycles=1.25
     )
     e_t = steady_state_error(hashimoto_controller(), 0.04)
     assert closed.half_width == pytest.approx(e_t, rel=0.01)
@@ -76,8 +69,8 @@ def test_eq20_against_simulation_static_loop(constrained_joint):
     # stick-slips, so the error is a staircase between breakaway (4 N m) and the undamped
     # overshoot (4.4 N m); its median depends on the ramp rate (3.77 here, 3.98 at half the
     # rate): tolerance 10 %.
-    opened = static_characteristic(
-        TorqueLoop(False, constrained_joint), amplitude=10.0, period=1.0, cycles=1.25
+    opened = hp.static_characteristic(
+        hp.TorqueLoop(False, constrained_joint), amplitude=10.0, period=1.0, cycles=1.25
     )
     assert opened.half_width == pytest.approx(4.0, rel=0.10)
     assert opened.half_width_pct == pytest.approx(10.0, rel=0.10)
@@ -92,7 +85,7 @@ def test_eq20_against_simulation_free_link():
     e_t = steady_state_error(ctl, 0.04)
     ref = step_reference(5.0, 0.15, t_step=0.005)
     for joint, tol in (
-        (paper_joint(constrained=False, smoothing=SMOOTH), 0.01),
+        (hp.paper_joint(constrained=False, smoothing=SMOOTH), 0.01),
         (IdealJoint(link_inertia=0.88, coulomb=0.04, smoothing=SMOOTH), 1e-3),
     ):
         run = simulate_torque_control(ctl, joint, IdealTorqueSensor(), ref)
@@ -170,18 +163,18 @@ def test_loop_with_misaligned_gauges_against_numpy_loop():
 def test_step_open_loop_error_and_friction_for_70pct(constrained_joint):
     # Undamped Coulomb model: the open-loop step sticks after half an oscillation at
     # 2(T_d - N tau_F): error (2 N tau_F - T_d)/T_d = 60 % for 5 N m and N tau_F = 4 N m.
-    res = step_response(TorqueLoop(False, constrained_joint), amplitude=5.0, duration=0.1)
+    res = hp.step_response(hp.TorqueLoop(False, constrained_joint), amplitude=5.0, duration=0.1)
     assert res.steady_state_error_pct == pytest.approx(60.0, abs=1.0)
-    f70 = open_loop_error_friction(0.70, 5.0)
+    f70 = hp.open_loop_error_friction(0.70, 5.0)
     assert f70 == pytest.approx(0.0425)
-    res70 = step_response(
-        TorqueLoop(False, paper_joint(friction=f70, smoothing=SMOOTH)), duration=0.1
+    res70 = hp.step_response(
+        hp.TorqueLoop(False, hp.paper_joint(friction=f70, smoothing=SMOOTH)), duration=0.1
     )
     assert res70.steady_state_error_pct == pytest.approx(70.0, abs=1.0)
 
 
 def test_step_closed_loop_error_and_rise_time(constrained_joint):
-    res = step_response(TorqueLoop(True, constrained_joint), amplitude=5.0, duration=0.1)
+    res = hp.step_response(hp.TorqueLoop(True, constrained_joint), amplitude=5.0, duration=0.1)
     e_t_pct = 100 * steady_state_error(hashimoto_controller(), 0.04) / 5.0
     assert abs(res.steady_state_error_pct) <= e_t_pct  # inside the eq. (20) band: 13 %
     assert abs(res.steady_state_error_pct) < 3.0  # "almost zero"
@@ -190,8 +183,8 @@ def test_step_closed_loop_error_and_rise_time(constrained_joint):
 
 
 def test_sine_tracking_improves_with_feedback(constrained_joint):
-    opened = sine_tracking(TorqueLoop(False, constrained_joint), duration=0.2)
-    closed = sine_tracking(TorqueLoop(True, constrained_joint), duration=0.2)
+    opened = hp.sine_tracking(hp.TorqueLoop(False, constrained_joint), duration=0.2)
+    closed = hp.sine_tracking(hp.TorqueLoop(True, constrained_joint), duration=0.2)
     # Open loop: 4 N m of friction against a 5 N m command - the motor barely moves (paper:
     # "very poor"); closed loop: gain within 15 % of 1 and the error 5x smaller.
     assert opened.gain < 0.3
@@ -202,7 +195,7 @@ def test_sine_tracking_improves_with_feedback(constrained_joint):
 def test_plant_joint_observes_transmitted_torque():
     from hdjax.plant import flexspline_torque, zero_state
 
-    joint = paper_joint()
+    joint = hp.paper_joint()
     st = zero_state()
     st = type(st)(
         st.theta_m + 0.5, st.omega_m, st.theta_l, st.omega_l, st.current, st.z, st.temperature
