@@ -10,6 +10,7 @@ import scipy.signal
 
 import hdjax
 from hdjax import pipelines as hp
+from hdjax.pipelines._strain_experiments import _checked
 from hdjax.strain import (
     IdealJoint,
     IdealTorqueSensor,
@@ -180,6 +181,15 @@ def test_step_closed_loop_error_and_rise_time(constrained_joint):
     assert abs(res.steady_state_error_pct) < 3.0  # "almost zero"
     # Paper: "approximately 7 ms" read off Fig. 16; +-1.5 ms = 3 samples.
     assert res.rise_time == pytest.approx(7e-3, abs=1.5e-3)
+
+
+def test_experiments_name_the_loop_they_need():
+    # what the experiments check first (under the test-time type hook, their annotation
+    # already refuses a non-loop before this check runs)
+    with pytest.raises(hdjax.ConfigError, match=r"TorqueLoop\(feedback=True\).*got True"):
+        _checked(True)
+    loop = hp.TorqueLoop(True)
+    assert _checked(loop) is loop
 
 
 def test_sine_tracking_improves_with_feedback(constrained_joint):

@@ -98,6 +98,16 @@ class TorqueLoop(NamedTuple):
         return ctl, ref, simulate_torque_control(ctl, joint, sensor, ref)
 
 
+def _checked(loop) -> TorqueLoop:
+    """`loop` when it is a [`TorqueLoop`][], else a `ConfigError` that says what to pass."""
+    if not isinstance(loop, TorqueLoop):
+        raise ConfigError(
+            f"the experiment's first argument is the loop it drives, a TorqueLoop such as "
+            f"TorqueLoop(feedback=True) or TorqueLoop(False, joint, sensor); got {loop!r}"
+        )
+    return loop
+
+
 # ---------------------------------------------------------------------------------------------
 # Fig. 15: static characteristic
 # ---------------------------------------------------------------------------------------------
@@ -120,7 +130,7 @@ def static_characteristic(
     **Arguments:** `loop` (the [`TorqueLoop`][] driven), `amplitude` [N·m], `period` [s] and
     number of `cycles` of the triangle.
     """
-    _, ref, run = loop.run(lambda ts: triangle_reference(amplitude, period, cycles, ts))
+    _, ref, run = _checked(loop).run(lambda ts: triangle_reference(amplitude, period, cycles, ts))
     err = np.asarray(run.reference - run.torque)
     rate = np.asarray(ref.rate)
     settled = np.asarray(ref.t) > 0.25 * period  # past the first rise from rest
@@ -161,7 +171,7 @@ def step_response(
     **Arguments:** `loop` (the [`TorqueLoop`][] driven), the step's `amplitude` [N·m], the
     run's `duration` [s] and the step's time `t_step` [s].
     """
-    ctl, _, run = loop.run(lambda ts: step_reference(amplitude, duration, ts, t_step))
+    ctl, _, run = _checked(loop).run(lambda ts: step_reference(amplitude, duration, ts, t_step))
     t = np.asarray(run.t)
     y = np.asarray(run.torque)
     n_tail = max(1, int(round(0.02 / ctl.sample_period)))
@@ -207,7 +217,7 @@ def sine_tracking(
     **Arguments:** `loop` (the [`TorqueLoop`][] driven), the sine's `amplitude` [N·m] and
     `frequency` [Hz], the run's `duration` [s].
     """
-    _, _, run = loop.run(lambda ts: sine_reference(amplitude, frequency, duration, ts))
+    _, _, run = _checked(loop).run(lambda ts: sine_reference(amplitude, frequency, duration, ts))
     t = np.asarray(run.t)
     keep = t >= 0.05
     err = np.asarray(run.reference - run.torque)[keep]
