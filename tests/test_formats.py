@@ -239,6 +239,18 @@ def test_chunked_csv_equals_whole_csv(reference):
     same(concat(chunks), ref, rtol=1e-15)
 
 
+@pytest.mark.parametrize("chunk", [2, 50, 10_000])
+def test_load_recording_in_chunks_equals_whole(reference, chunk):
+    # the chunks joined are the whole file's recording (the parser holds one chunk at a time)
+    d, raw, path, ref = reference
+    rec = hdjax.load_recording(path, CMAP, chunk=chunk)
+    same(rec, ref, rtol=1e-15)
+    assert rec.source == ref.source
+    pq = d / "log-joined.parquet"
+    write_parquet(pq, raw)
+    same(hdjax.load_recording(pq, CMAP, chunk=chunk), ref, rtol=1e-15)
+
+
 def test_plain_mcap_topic_needs_no_map(tmp_path):
     from mcap.writer import Writer
 

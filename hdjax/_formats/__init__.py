@@ -26,7 +26,7 @@ import numpy as np
 from .._custom_types import PathLike
 from .._errors import DataError
 from .._io import ColumnMap, _build, load_csv, load_npz
-from .._recording import Recording
+from .._recording import Recording, make_recording
 from ._columns import as_float_column as as_float_column, require as require
 from ._mapper import ChunkMapper, needed_sources
 
@@ -132,16 +132,50 @@ def _at_least_two(tables):
 
 
 def load_recording(
-    path: PathLike, columns: ColumnMap | None = None, *, check_units: bool = True
+    path: PathLike,
+    columns: ColumnMap | None = None,
+    *,
+    check_units: bool = True,
+    chunk: int | None = None,
 ) -> Recording:
     """Load a recording chosen by the file's suffix: `.csv` ([`hdjax.load_csv`][]), `.npz`
     ([`hdjax.load_npz`][]), or Parquet, HDF5 / MATLAB v7.3 or MCAP through their readers (the
-    column map applied as for CSV)."""
+    column map applied as for CSV).
+
+    With `chunk` (rows, at least 2) the file is parsed `chunk` rows at a time and the chunks
+    joined: the same recording, while the parser's working memory is bounded by the chunk
+    instead of the file (a CSV's text and cells take about ten times the recording).
+    """
     if Path(path).is_dir():
         raise DataError(f"{path}: is a folder; give a recording file (.csv, .npz, ...)")
+    if chunk is not None:
+        return _joined(iter_recordings(path, columns, chunk=chunk, check_units=False), check_units)
     suffix = Path(path).suffix.lower()
     if suffix == ".csv":
         return load_csv(path, columns, check_units=check_units)
     if suffix == ".npz":
         return load_npz(path, columns, check_units=check_units)
     return load(path, columns, check_units=check_units)
+
+
+def _joined(chunks: Iterator[Recording], check_units: bool) -> Recording:
+    """One recording of consecutive chunks (NumPy concatenation; units checked once, on the
+    whole, as a whole-file load does)."""
+    cols: dict[str, list[np.ndarray]] = {}
+    source = ""
+    for rec in chunks:
+        source = rec.source
+        for name in ("t", "theta_m", "theta_l", "current", "torque"):
+            value = getattr(rec, name)
+            if value is not None:
+                cols.setdefault(name, []).append(np.asarray(value))
+        for name, value in rec.extras.items():
+            cols.setdefault(f"x:{name}", []).append(np.asarray(value))
+    whole = {k: np.concatenate(v) for k, v in cols.items()}
+    return make_recording(
+        *(whole[k] for k in ("t", "theta_m", "theta_l", "current")),
+        whole.get("torque"),
+        {k[2:]: v for k, v in whole.items() if k.startswith("x:")},
+        source=source,
+        check_units=check_units,
+    )

@@ -104,7 +104,8 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
         metavar="N",
         help="accumulate the loop's least-squares fits (calibration, cross-validation, "
         "candidate scores, intervals) over chunks of N samples (at least 16), so no design of "
-        "the whole record is held; 0: the whole record at once (default 0)",
+        "the whole record is held, and parse --train and --test N rows at a time; 0: the whole "
+        "record at once (default 0)",
     )
     p.add_argument(
         "--ignore-column",
@@ -133,6 +134,9 @@ def run(args: argparse.Namespace) -> int:
     inputs = [args.train, args.test, args.joint, args.config]
     if args.config is not None:
         inputs += _config_inputs(args.config)
+    check_chunk(args.chunk, "--chunk")
+    # the memory guard counts whole-file parsing even with --chunk: the loop itself needs about
+    # as much per sample as a parse (measured), so the guard stays conservative
     check_read_memory(inputs[:2] + inputs[4:], fix="give shorter --train and --test logs")
     with ResultDir(out, overwrite=args.overwrite, inputs=inputs, command="discover") as rd:
         return _run_into(rd, args)
@@ -153,9 +157,10 @@ def _run_into(rd, args: argparse.Namespace) -> int:
             train, test, joint, cfg, cfg_notes = load_discover_config(args.config)
         else:
             joint = load_joint(args.joint)
-            # every log format, by suffix, through the loader the other commands use
-            train = load_recording(args.train)
-            test = load_recording(args.test)
+            # every log format, by suffix, through the loader the other commands use; with
+            # --chunk parsed chunk by chunk (the parser's memory bounded by the chunk)
+            train = load_recording(args.train, chunk=args.chunk or None)
+            test = load_recording(args.test, chunk=args.chunk or None)
             cfg_notes = ["reference: the 'torque' column of the --train and --test files"]
     say = (lambda s: None) if args.quiet else (lambda s: print(f"[discover] {s}", file=sys.stderr))
     for w in caught:
