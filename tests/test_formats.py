@@ -249,6 +249,8 @@ def test_load_recording_in_chunks_equals_whole(reference, chunk):
     pq = d / "log-joined.parquet"
     write_parquet(pq, raw)
     same(hdjax.load_recording(pq, CMAP, chunk=chunk), ref, rtol=1e-15)
+    with pytest.raises(hdjax.DataError, match="chunk must be an integer >= 2"):
+        hdjax.load_recording(path, CMAP, chunk=1)
 
 
 def test_plain_mcap_topic_needs_no_map(tmp_path):

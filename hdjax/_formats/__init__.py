@@ -159,23 +159,11 @@ def load_recording(
 
 
 def _joined(chunks: Iterator[Recording], check_units: bool) -> Recording:
-    """One recording of consecutive chunks (NumPy concatenation; units checked once, on the
-    whole, as a whole-file load does)."""
-    cols: dict[str, list[np.ndarray]] = {}
-    source = ""
-    for rec in chunks:
-        source = rec.source
-        for name in ("t", "theta_m", "theta_l", "current", "torque"):
-            value = getattr(rec, name)
-            if value is not None:
-                cols.setdefault(name, []).append(np.asarray(value))
-        for name, value in rec.extras.items():
-            cols.setdefault(f"x:{name}", []).append(np.asarray(value))
-    whole = {k: np.concatenate(v) for k, v in cols.items()}
-    return make_recording(
-        *(whole[k] for k in ("t", "theta_m", "theta_l", "current")),
-        whole.get("torque"),
-        {k[2:]: v for k, v in whole.items() if k.startswith("x:")},
-        source=source,
-        check_units=check_units,
-    )
+    """One recording of consecutive chunks (units checked once, on the whole, as a whole-file
+    load does)."""
+    recs = list(chunks)  # iter_recordings yields at least one
+    parts = [rec.to_numpy() for rec in recs]
+    whole = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    core = [whole.pop(k) for k in ("t", "theta_m", "theta_l", "current")]
+    torque = whole.pop("torque", None)
+    return make_recording(*core, torque, whole, source=recs[0].source, check_units=check_units)
