@@ -1,6 +1,9 @@
 """Streaming least squares: chunked calibration equals the in-memory fit, states carry across
 chunks, and the accumulators match numpy.linalg.lstsq."""
 
+import dataclasses
+
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -15,6 +18,7 @@ from hdjax.compliance import (
     calibrate_stream,
 )
 from hdjax.config import synthetic_recording
+from hdjax.effects import SEGMENT_START, TwistHysteresis, twist_compliance
 from hdjax.pipelines._paper import stacked_signals
 
 JOINT = hdjax.Joint(ratio=100.0, rated_torque=100.0)
@@ -26,8 +30,14 @@ def recs():
     return [synthetic_recording(JOINT, n, seed=s) for n, s in ((4000, 1), (3100, 2))]
 
 
-def model_of(velocity="difference", hysteresis=False):
+def model_of(velocity="difference", hysteresis=False, recs=None):
+    """The paper's model; `hysteresis` True: a Dahl state of the torque path; "twist": of the
+    measured twist (the residual loop's `hysteresis:torque`), its compliance from `recs`."""
     m = ComplianceModel.paper(JOINT, current_scale=1.0, velocity=velocity)
+    if hysteresis == "twist":
+        sig, torque = stacked_signals(m, recs)
+        k = twist_compliance(sig, torque, JOINT.rated_torque)
+        return m.with_effects(TwistHysteresis(torque_scale=10.0, compliance=k))
     return m.with_effects(Hysteresis(torque_scale=10.0)) if hysteresis else m
 
 
@@ -43,15 +53,35 @@ def assert_same_fit(a, b, rtol=1e-9):
 
 
 @pytest.mark.parametrize(
-    "velocity,hysteresis", [("difference", False), ("difference", True), ("smoothed", True)]
+    "velocity,hysteresis",
+    [
+        ("difference", False),
+        ("difference", True),
+        ("smoothed", True),
+        ("difference", "twist"),
+        ("smoothed", "twist"),
+    ],
 )
 def test_stream_equals_in_memory(recs, velocity, hysteresis):
-    """Velocities (a halo of neighbouring samples) and the Dahl state (carried) cross chunk
-    boundaries exactly as in one pass."""
-    m = model_of(velocity, hysteresis)
+    """Velocities (a halo of neighbouring samples) and the Dahl state (carried, of the torque
+    path or of the measured twist) cross chunk boundaries exactly as in one pass."""
+    m = model_of(velocity, hysteresis, recs)
     mem = calibrate_lstsq(m, stacked_signals(m, recs))
     streamed = calibrate_stream(m, RecordingStream.from_recordings(recs, CHUNK), chunk=CHUNK)
     assert_same_fit(mem, streamed)
+
+
+def test_twist_hysteresis_state_matters_across_chunks(recs):
+    """The carried twist-driven state is what makes the streamed fit equal: the same fit with
+    the state restarted at every chunk (`SEGMENT_START` set there) gives other coefficients."""
+    m = model_of("difference", "twist", recs)
+    sig, torque = stacked_signals(m, recs)
+    mem = np.asarray(calibrate_lstsq(m, (sig, torque)).value.coef)
+    starts = np.concatenate([np.arange(r.n_samples) % CHUNK == 0 for r in recs])
+    extras = {**sig.extras, SEGMENT_START: jnp.asarray(starts.astype(np.float64))}
+    restarted = calibrate_lstsq(m, (dataclasses.replace(sig, extras=extras), torque))
+    coef = np.asarray(restarted.value.coef)
+    assert np.max(np.abs(coef - mem)) > 1e-3 * np.max(np.abs(mem))
 
 
 def test_well_conditioned_stream_reads_once(recs, monkeypatch):

@@ -155,3 +155,37 @@ def test_streamed_figure_keeps_the_samples_of_the_whole_figure():
     np.testing.assert_array_equal(tt, t[idx])
     np.testing.assert_array_equal(ee, est[idx])
     np.testing.assert_array_equal(mm, meas[idx])
+
+
+def test_twist_hysteresis_estimate_carries_across_chunks():
+    """A model with the residual loop's hysteresis (a Dahl state of the measured twist) gives,
+    streamed, the in-memory estimate: the state carries from chunk to chunk and restarts with
+    each recording. Restarting it at every chunk instead gives another estimate."""
+    from hdjax.compliance import ComplianceModel, calibrate_lstsq, estimate_torque
+    from hdjax.effects import TwistHysteresis, twist_compliance
+    from hdjax.pipelines._paper import stacked_signals
+    from hdjax.pipelines._streamed import estimate_model_streamed
+
+    train = [synthetic_recording(JOINT, 1400, seed=5)]
+    tests = [synthetic_recording(JOINT, n, seed=s) for n, s in ((700, 6), (450, 7))]
+    scale = float(np.max(np.abs(np.asarray(train[0].current))))
+    base = ComplianceModel.paper(JOINT, n_segments=3, poly_order=2, fourier_order=1,
+                                 current_scale=scale)  # fmt: skip
+    k = twist_compliance(*stacked_signals(base, train), JOINT.rated_torque)
+    model = base.with_effects(TwistHysteresis(torque_scale=40.0, compliance=k))
+    cal = calibrate_lstsq(model, stacked_signals(model, train)).value
+    whole = [np.asarray(estimate_torque(cal, r).torque) for r in tests]
+    err = np.concatenate([w - np.asarray(r.torque) for w, r in zip(whole, tests)])
+    n = sum(r.n_samples for r in tests)
+    got = estimate_model_streamed(cal, RecordingStream.from_recordings(tests, CHUNK), n, CHUNK)
+    assert got.errors.n == n
+    assert got.errors.rms == pytest.approx(np.sqrt(np.mean(err**2)), rel=RTOL)
+    assert got.errors.peak == pytest.approx(np.max(np.abs(err)), rel=RTOL)
+    est = np.concatenate(whole)
+    # the carried state matters: the same model with the state restarted at every chunk
+    restarted = [
+        np.asarray(estimate_torque(cal, c).torque)
+        for r in tests
+        for c in next(iter(RecordingStream.from_recordings([r], CHUNK)))
+    ]
+    assert np.max(np.abs(np.concatenate(restarted) - est)) > 1e-3 * np.max(np.abs(est))

@@ -15,14 +15,14 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ..effects._dahl_carry import is_sequential
 from ._signals import signals_from_recording
-from ._terms import TORQUE_PATH
 
 
 def fast_path_supported(model) -> bool:
     """Backward-difference velocity, and path terms only of the Dahl kind (one column)."""
-    paths = [t for t in model.effect_terms if t.torque_kind == "path"]
-    ok = all(hasattr(t, "torque_scale") and len(t.names()) == 1 for t in paths)
+    paths = [t for t in model.effect_terms if t.torque_kind == "path" or is_sequential(t)]
+    ok = all(is_sequential(t) and len(t.names()) == 1 for t in paths)
     return model.velocity == "difference" and ok
 
 
@@ -45,8 +45,10 @@ def fused_columns(model, win, w, z0s):
     z_ends, k = [], 0
     last_row = jnp.max(jnp.where(w > 0, jnp.arange(w.shape[0]), 0))
     for term in model.effect_terms:
-        if term.torque_kind == "path":
-            driver = sig.extras.get(TORQUE_PATH, torque)
+        if is_sequential(term):
+            # the Dahl state of the term's own driver: the torque path (`Hysteresis`, the
+            # signal TORQUE_PATH when present) or the measured twist (`TwistHysteresis`)
+            driver = term.dahl_driver(sig, torque)
             # the state z and the driver value before this window are carried (NaN: none yet,
             # as at the very start); halo and padding rows (w = 0) leave the state unchanged
             z0, prev = z0s[k, 0], z0s[k, 1]

@@ -31,6 +31,7 @@ from .._formats import iter_recordings
 from .._io import ColumnMap
 from .._recording import Recording
 from .._solution import Solution
+from ..effects._dahl_carry import DahlCarry, is_sequential
 from ._lstsq import (
     CSNE_MAX_COND,
     _compact_index,
@@ -43,7 +44,6 @@ from ._model import ComplianceModel
 from ._signals import signals_from_recording
 from ._stream import NormalEquations, StreamingQR, scaled_cholesky
 from ._stream_fast import fast_path_supported, fused_columns
-from ._terms import TORQUE_PATH
 
 REFINE_ABOVE_COND = 1e3
 r"""The refinement pass over the data runs only above this scaled condition number $\kappa$:
@@ -201,55 +201,46 @@ def _window_columns(model: ComplianceModel, sig, torque):
     cols = [jnp.clip(torque, lo, hi) - min(max(0.0, lo), hi) for lo, hi in model.segment_bounds]
     cols += model.base_column_list(sig)
     for term in model.effect_terms:
-        if term.torque_kind == "path":
-            cols += [None] * len(term.names())
+        if term.torque_kind == "path" or is_sequential(term):
+            cols += [None] * len(term.names())  # carried across chunks: `_PathState`
             continue
         block = term.columns(sig, torque)
         cols += [block[:, j] for j in range(block.shape[1])]
     return cols, model.segment_index(torque)
 
 
-@jax.jit
-def _dahl_from(du, z0):
-    # the scan of compliance._terms.dahl_state, started from the state the last chunk ended in
-    def _step(z, d):
-        z = jnp.clip(z + d * (1.0 - z * jnp.sign(d)), -1.0, 1.0)
-        return z, z
-
-    return jax.lax.scan(_step, z0, du)
+def _carried(model: ComplianceModel) -> list:
+    """The effect terms whose column carries a state across chunks: every Dahl state, of the
+    torque path (`Hysteresis`) or of the measured twist (`TwistHysteresis`); a path term
+    without one is refused."""
+    out = []
+    for t in model.effect_terms:
+        if not (t.torque_kind == "path" or is_sequential(t)):
+            continue
+        if not is_sequential(t) or len(t.names()) != 1:
+            raise CalibrationError(
+                f"streaming calibration does not know how to carry the state of the "
+                f"path-dependent term {t.key!r}; calibrate in memory (fit.chunk = 0)"
+            )
+        out.append(t)
+    return out
 
 
 class _PathState:
-    """The carried state of each path-dependent (hysteresis) term: last driver value and z."""
+    """The carried Dahl state of each sequential term ([`hdjax.effects._dahl_carry`][])."""
 
-    def __init__(self, model: ComplianceModel, chunk: int):
-        self.terms = [t for t in model.effect_terms if t.torque_kind == "path"]
-        for t in self.terms:
-            if not hasattr(t, "torque_scale") or len(t.names()) != 1:
-                raise CalibrationError(
-                    f"streaming calibration does not know how to carry the state of the "
-                    f"path-dependent term {t.key!r}; calibrate in memory (fit.chunk = 0)"
-                )
-        self.chunk = chunk
-        self.reset()
-
-    def reset(self):
-        self.last = [None] * len(self.terms)
-        self.z = [jnp.zeros((), jnp.float64)] * len(self.terms)
+    def __init__(self, model: ComplianceModel):
+        self.terms = _carried(model)
+        self.carry = DahlCarry()
 
     def columns(self, sig, torque, lo: int, hi: int) -> list[np.ndarray]:
-        out = []
-        for i, term in enumerate(self.terms):
-            driver = np.asarray(sig.extras.get(TORQUE_PATH, torque))[lo:hi]
-            prev = driver[0] if self.last[i] is None else self.last[i]
-            du = np.diff(driver, prepend=prev) / term.torque_scale
-            n = du.shape[0]
-            size = max(self.chunk, n)
-            z_end, zs = _dahl_from(jnp.asarray(np.r_[du, np.zeros(size - n)]), self.z[i])
-            self.z[i] = z_end  # padded zero steps leave the state unchanged
-            self.last[i] = driver[-1]
-            out.append(np.asarray(zs)[:n])
-        return out
+        """Each sequential term's state over a window's own rows `lo:hi` (its halo left out)."""
+        own = jax.tree_util.tree_map(lambda x: x[lo:], sig)
+        torque = jnp.asarray(torque)[lo:]
+        return [
+            self.carry.column(i, term, own, torque, hi - lo, numpy=False)
+            for i, term in enumerate(self.terms)
+        ]
 
 
 def _chunk_design(model, win, lo, hi, paths: _PathState):
@@ -278,7 +269,7 @@ def _passes(model, stream, chunk):
     smoothed = model.velocity == "smoothed"
     before = SMOOTH_HALF_WINDOW if smoothed else 1
     after = SMOOTH_HALF_WINDOW if smoothed else 0
-    paths = _PathState(model, chunk)
+    paths = _PathState(model)
     pad = None if smoothed else chunk + before
     for win, lo, hi in windows(stream, before, after, pad):
         yield _chunk_design(model, win, lo, hi, paths)
@@ -287,7 +278,7 @@ def _passes(model, stream, chunk):
 def _fused_passes(model, stream, chunk):
     """`_passes` for the backward-difference velocity: windows of one length (`chunk + 1`),
     each in one compiled program ([`fused_columns`][]), the Dahl states carried in it."""
-    n_paths = sum(t.torque_kind == "path" for t in model.effect_terms)
+    n_paths = len(_carried(model))
     z = jnp.asarray(np.tile([0.0, np.nan], (max(n_paths, 1), 1)))  # (state, last driver)
     for win, lo, hi in windows(stream, 1, 0, chunk + 1):
         w = np.zeros(win.t.shape[0])  # chunk + 1, or more for a file's folded one-row tail

@@ -22,12 +22,18 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import equinox as eqx
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from .. import network as nw
 from .._errors import ConfigError, DataError
+from .._features import signals
 from ..compliance import RecordingStream, estimate_torque
 from ..compliance._stream_fit import SMOOTH_HALF_WINDOW, _arrays, _recording, windows
+from ..effects import Column
+from ..effects._dahl_carry import DahlCarry, is_sequential
 from ..network._kalman import PAPER_P0, PAPER_Q, PAPER_R, kalman_filter
 
 FIGURE_LIMIT = 6000
@@ -145,16 +151,62 @@ def check_streamable(model) -> None:
         )
 
 
+STATE_COLUMN = "_carried_dahl_state_{}"
+"""The extra column that holds the carried Dahl state of a model's k-th twist-driven term."""
+
+
+def _carried_states(model):
+    """`(model, terms)`: the model with each twist-driven Dahl term (`TwistHysteresis`, a
+    torque-free state of the measured twist) replaced by a [`hdjax.effects.Column`][] reading
+    its state from an extra column (same coefficient, the same estimate), and those terms."""
+    seq = [t for t in model.effect_terms if is_sequential(t) and t.torque_kind != "path"]
+    if not seq:
+        return model, []
+    terms, k = [], 0
+    for t in model.effect_terms:
+        if t in seq:
+            terms.append(Column(name=STATE_COLUMN.format(k)))
+            k += 1
+        else:
+            terms.append(t)
+    return dataclasses.replace(model, effect_terms=tuple(terms)), seq
+
+
+def _with_states(model, terms, carry: DahlCarry, win, lo: int, hi: int):
+    """The window with each carried state over its own rows `lo:hi` as an extra column (the
+    halo rows hold the neighbouring value; their estimates are not used)."""
+    sig = signals(win, model.joint, velocity=model.velocity)
+    own = jax.tree_util.tree_map(lambda x: x[lo:], sig)
+    extras = dict(win.extras)
+    for k, term in enumerate(terms):
+        z = carry.column(k, term, own, None, hi - lo, numpy=False)
+        full = np.empty(win.n_samples)
+        full[:lo], full[lo:hi], full[hi:] = z[0], z, z[-1]
+        extras[STATE_COLUMN.format(k)] = jnp.asarray(full)
+    return dataclasses.replace(win, extras=extras)
+
+
 def estimate_model_streamed(model, stream: RecordingStream, n: int, chunk: int):
-    """The model's estimate on a streamed part (eqs. (26)-(27)), as a [`StreamedEstimate`][]."""
+    """The model's estimate on a streamed part (eqs. (26)-(27)), as a [`StreamedEstimate`][].
+
+    A twist-driven hysteresis state (the residual loop's `hysteresis:torque`) is carried from
+    each chunk into the next ([`hdjax.effects._dahl_carry.DahlCarry`][]), restarting with each
+    recording as the in-memory estimate does, so every sample's estimate is the one of the
+    whole recording."""
     check_streamable(model)
     smoothed = model.velocity == "smoothed"
     before = SMOOTH_HALF_WINDOW if smoothed else 1
     after = SMOOTH_HALF_WINDOW if smoothed else 0
     pad = None if smoothed else chunk + before  # one compiled shape for every full chunk
     sums, env = ErrorSums(), _Envelope(n)
+    inner, carried = _carried_states(model)
+    carry = DahlCarry()
     for win, lo, hi in windows(stream, before, after, pad):
-        est = estimate_torque(model, win)
+        if carried:
+            if lo == 0:  # a new recording: its state starts afresh
+                carry = DahlCarry()
+            win = _with_states(model, carried, carry, win, lo, hi)
+        est = estimate_torque(inner, win)
         torque = np.asarray(est.torque)[lo:hi]
         ref = np.asarray(win.torque)[lo:hi]
         sums.add(torque - ref, np.asarray(est.in_range)[lo:hi])
@@ -194,9 +246,6 @@ def stream_features(stream: RecordingStream, joint, *, periodic, orders, kalman)
 
 
 def _with_current(rec, current):
-    import equinox as eqx
-    import jax.numpy as jnp
-
     return eqx.tree_at(lambda r: r.current, rec, jnp.asarray(current, jnp.float64))
 
 
