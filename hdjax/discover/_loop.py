@@ -389,9 +389,11 @@ def _chunked_scores(cands, model, chunks: Chunks, resid, blocks, options, phase)
                     c = candidate_columns(cand.term, sc, tc)[:rows]
                 groups.append(np.asarray(c, np.float64))
             if first[0]:
+                # copies, not views: a view of every `step`-th row keeps the whole chunk's
+                # arrays alive, and memory would grow with the record instead of the chunk
                 start = (-lo) % step
-                thin_a.append(a[start::step])
-                thin_c.append([g[start::step] for g in groups])
+                thin_a.append(np.array(a[start::step]))
+                thin_c.append([np.array(g[start::step]) for g in groups])
                 lo_hi.append([(g.min(axis=0), g.max(axis=0)) for g in groups])
             yield lo, hi, a, groups
         first[0] = False

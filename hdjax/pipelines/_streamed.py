@@ -258,8 +258,10 @@ def training_rows(stream: RecordingStream, joint, n_total: int, max_samples: int
     for feats, y, _ in stream_features(stream, joint, **kw):
         m = y.shape[0]
         first = (-start) % stride
-        xs.append(np.asarray(feats.x)[first::stride])
-        ys.append(y[first::stride])
+        # copies, not views: a view keeps the whole chunk alive, so memory would grow with
+        # the log instead of staying bounded by the chunk (and the kept rows)
+        xs.append(np.array(np.asarray(feats.x)[first::stride]))
+        ys.append(np.array(y[first::stride]))
         layout = feats.layout
         start += m
     return np.concatenate(xs), np.concatenate(ys), layout
