@@ -126,14 +126,16 @@ def peak_abs(stream: RecordingStream, column: str = "current") -> float:
 # Windows: a chunk with its halo, as one recording
 
 
-def _arrays(rec: Recording) -> dict[str, np.ndarray]:
+def _arrays(rec: Recording, need_torque: bool = True) -> dict[str, np.ndarray]:
     out = {k: np.asarray(getattr(rec, k)) for k in ("t", "theta_m", "theta_l", "current")}
     if rec.torque is None:
-        raise DataError(
-            f"{rec.source}: calibration needs a reference 'torque' column (a torque sensor "
-            "or another reference); the recording has none"
-        )
-    out["torque"] = np.asarray(rec.torque)
+        if need_torque:
+            raise DataError(
+                f"{rec.source}: calibration needs a reference 'torque' column (a torque sensor "
+                "or another reference); the recording has none"
+            )
+    else:
+        out["torque"] = np.asarray(rec.torque)
     out.update({f"x:{k}": np.asarray(v) for k, v in rec.extras.items()})
     return out
 
@@ -145,7 +147,7 @@ def _recording(cols: dict[str, np.ndarray], source: str) -> Recording:
         theta_m=j("theta_m"),
         theta_l=j("theta_l"),
         current=j("current"),
-        torque=j("torque"),
+        torque=j("torque") if "torque" in cols else None,
         extras={k[2:]: j(k) for k in cols if k.startswith("x:")},
         source=source,
     )
@@ -165,17 +167,25 @@ def _pad(cols: dict[str, np.ndarray], length: int) -> dict[str, np.ndarray]:
     return out
 
 
-def windows(stream: RecordingStream, before: int, after: int, pad_to: int | None):
+def windows(
+    stream: RecordingStream,
+    before: int,
+    after: int,
+    pad_to: int | None,
+    *,
+    need_torque: bool = True,
+):
     """`(window, lo, hi)`: each chunk with up to `before` / `after` samples of its neighbours
-    in the same recording; rows `lo:hi` of `window` are the chunk's own."""
+    in the same recording; rows `lo:hi` of `window` are the chunk's own. A recording without
+    a reference torque is refused unless `need_torque` is false (an estimate needs none)."""
     for chunks in stream:
         it = iter(chunks)
         cur_rec = next(it, None)
-        cur = None if cur_rec is None else _arrays(cur_rec)
+        cur = None if cur_rec is None else _arrays(cur_rec, need_torque)
         prev = None
         while cur is not None:
             nxt_rec = next(it, None)
-            nxt = None if nxt_rec is None else _arrays(nxt_rec)
+            nxt = None if nxt_rec is None else _arrays(nxt_rec, need_torque)
             parts, lo = [], 0
             if prev is not None and before:
                 parts.append({k: v[-before:] for k, v in prev.items()})

@@ -5,6 +5,7 @@
 task = "calibrate+discover"   # or "calibrate", "estimate"
 split = 0.3                   # the last 30 % of each log is its TEST part (discover)
 max_effects = 3
+chunk = 0                     # > 0: every task reads and fits its log this many samples at a time
 
 [model]                       # the calibrated structure (defaults: the paper's)
 n_segments = 5

@@ -10,11 +10,12 @@ from __future__ import annotations
 import os
 import time
 import warnings
+from types import SimpleNamespace
 
 import numpy as np
 
 from .._cache import enable_compilation_cache
-from .._errors import HdjaxError
+from .._errors import HdjaxError, ModelMismatchError
 from .._formats import load_recording
 from .._io import ColumnMap
 from .._joint import Joint
@@ -27,8 +28,10 @@ from ..compliance import (
 )
 from ..compliance._stream_fit import peak_abs
 from ..config import check_compatible, load_model
+from ..config._saved_model import ratio_mismatch
 from ..config._schema import paper_model
 from ..discover import DiscoverOptions, discover
+from ..pipelines._streamed import ErrorSums, model_estimates
 
 ARCSEC = 648000.0 / np.pi
 _CACHE_SET: list = []
@@ -146,9 +149,11 @@ def _effect_amplitudes(steps) -> list[dict]:
 def _calibrate_discover(spec) -> dict:
     joint = Joint.from_dict(spec["joint"])
     _, cmap = _joint_and_map(spec)
-    rec = load_recording(spec["log"], cmap)
-    train, test = rec.split(1.0 - spec["settings"]["split"])
     m, s = spec["model_structure"], spec["settings"]
+    # with `chunk`, the log is parsed and the loop's fits accumulated chunk by chunk (the same
+    # results to rounding, as `hdjax discover --chunk`)
+    rec = load_recording(spec["log"], cmap, chunk=s["chunk"] or None)
+    train, test = rec.split(1.0 - s["split"])
     options = DiscoverOptions(
         max_effects=s["max_effects"],
         min_gain=s["min_gain"],
@@ -156,6 +161,7 @@ def _calibrate_discover(spec) -> dict:
         poly_order=m["poly_order"],
         fourier_order=m["fourier_order"],
         per_segment=m["per_segment"],
+        chunk=s["chunk"],
     )
     sol = discover(train, test, joint, options)
     result = sol.aux
@@ -177,6 +183,8 @@ def _estimate(spec) -> dict:
     saved = load_model(spec["model_file"])
     if saved.compliance is None:
         raise ValueError(f"{spec['model_file']}: holds no compliance model")
+    if spec["settings"]["chunk"]:
+        return _estimate_streamed(spec, saved, joint, cmap)
     rec = load_recording(spec["log"], cmap)
     check_compatible(saved, rec, joint)
     est = estimate_torque(saved.compliance, rec)
@@ -188,6 +196,52 @@ def _estimate(spec) -> dict:
     if rec.torque is not None:
         m = error_metrics(np.asarray(est.torque), np.asarray(rec.torque), joint.rated_torque)
         out.update(test_rms_Nm=float(m.rms), test_max_Nm=float(m.max))
+    return out
+
+
+KEPT_ROWS = 20000
+"""Rows of the angles a streamed estimate keeps (evenly thinned) for the gear-ratio check."""
+
+
+def _estimate_streamed(spec, saved, joint, cmap) -> dict:
+    """`_estimate` with the log read and estimated `chunk` samples at a time (memory bounded by
+    the chunk; the estimate of every sample is the whole log's). The saved model's checks run
+    on the first chunk (its ratio and columns) and, after the pass, on every k-th sample of the
+    angles (the gear ratio the data shows)."""
+    chunk = spec["settings"]["chunk"]
+    stream = RecordingStream.from_files([spec["log"]], cmap, chunk=chunk)
+    n, in_range, sums, kept, stride = 0, 0, None, [], 1
+    for rows, est in model_estimates(saved.compliance, stream, chunk, need_torque=False):
+        if n == 0:
+            check_compatible(saved, rows, joint, check_angles=False)
+            sums = None if rows.torque is None else ErrorSums()
+        torque = np.asarray(est.torque)
+        if sums is not None:
+            sums.add(torque - np.asarray(rows.torque))
+        in_range += int(np.sum(np.asarray(est.in_range)))
+        idx = np.arange(n, n + torque.shape[0])
+        pick = idx % stride == 0
+        kept.append(np.stack([np.asarray(rows.theta_l)[pick], np.asarray(rows.theta_m)[pick]]))
+        n += torque.shape[0]
+        if sum(k.shape[1] for k in kept) > 2 * KEPT_ROWS:  # thin what is kept: bounded
+            stride *= 2
+            kept = [np.concatenate(kept, axis=1)[:, ::2]]
+    angles = np.concatenate(kept, axis=1)
+    why = ratio_mismatch(
+        saved.joint.ratio,
+        SimpleNamespace(theta_l=angles[0], theta_m=angles[1], source=spec["log"]),
+        whose="the model's",
+    )
+    if why:
+        raise ModelMismatchError(why)
+    out = {
+        "n_samples": n,
+        "coefficients": _coefficients(saved.compliance),
+        "in_range_pct": 100.0 * in_range / n,
+    }
+    if sums is not None:
+        m = sums.as_dict(joint.rated_torque)
+        out.update(test_rms_Nm=float(m["rms"]), test_max_Nm=float(m["max"]))
     return out
 
 

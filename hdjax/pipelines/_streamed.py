@@ -186,31 +186,42 @@ def _with_states(model, terms, carry: DahlCarry, win, lo: int, hi: int):
     return dataclasses.replace(win, extras=extras)
 
 
-def estimate_model_streamed(model, stream: RecordingStream, n: int, chunk: int):
-    """The model's estimate on a streamed part (eqs. (26)-(27)), as a [`StreamedEstimate`][].
+def model_estimates(model, stream: RecordingStream, chunk: int, *, need_torque: bool = True):
+    """The model's estimate (eqs. (26)-(27)) chunk by chunk: `(chunk, estimate)` for each
+    chunk of the stream, `chunk` the chunk's own rows (a [`hdjax.Recording`][]) and `estimate`
+    the [`hdjax.compliance.TorqueEstimate`][] of those rows, equal to the whole recording's.
 
-    A twist-driven hysteresis state (the residual loop's `hysteresis:torque`) is carried from
-    each chunk into the next ([`hdjax.effects._dahl_carry.DahlCarry`][]), restarting with each
-    recording as the in-memory estimate does, so every sample's estimate is the one of the
-    whole recording."""
+    Velocities read a halo of neighbouring samples; a twist-driven hysteresis state (the
+    residual loop's `hysteresis:torque`) is carried from each chunk into the next
+    ([`hdjax.effects._dahl_carry.DahlCarry`][]) and restarts with each recording, as the
+    in-memory estimate does. Recordings without a reference torque are refused unless
+    `need_torque` is false.
+    """
     check_streamable(model)
     smoothed = model.velocity == "smoothed"
     before = SMOOTH_HALF_WINDOW if smoothed else 1
     after = SMOOTH_HALF_WINDOW if smoothed else 0
     pad = None if smoothed else chunk + before  # one compiled shape for every full chunk
-    sums, env = ErrorSums(), _Envelope(n)
     inner, carried = _carried_states(model)
     carry = DahlCarry()
-    for win, lo, hi in windows(stream, before, after, pad):
+    for win, lo, hi in windows(stream, before, after, pad, need_torque=need_torque):
         if carried:
             if lo == 0:  # a new recording: its state starts afresh
                 carry = DahlCarry()
             win = _with_states(model, carried, carry, win, lo, hi)
         est = estimate_torque(inner, win)
-        torque = np.asarray(est.torque)[lo:hi]
-        ref = np.asarray(win.torque)[lo:hi]
-        sums.add(torque - ref, np.asarray(est.in_range)[lo:hi])
-        env.add(np.asarray(win.t)[lo:hi], ref, torque)
+        own = jax.tree_util.tree_map(lambda x: x[lo:hi], (win, est))
+        yield own
+
+
+def estimate_model_streamed(model, stream: RecordingStream, n: int, chunk: int):
+    """The model's estimate on a streamed part (eqs. (26)-(27)), as a [`StreamedEstimate`][]
+    ([`model_estimates`][]: every sample's estimate is the one of the whole recording)."""
+    sums, env = ErrorSums(), _Envelope(n)
+    for rows, est in model_estimates(model, stream, chunk):
+        torque, ref = np.asarray(est.torque), np.asarray(rows.torque)
+        sums.add(torque - ref, np.asarray(est.in_range))
+        env.add(np.asarray(rows.t), ref, torque)
     return StreamedEstimate(sums, *env.series(), in_range=True)
 
 
