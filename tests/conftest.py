@@ -56,6 +56,7 @@ SLOW_FILES = {
     "test_lara8_reference.py": 25,
     "test_plant_simulate.py": 25,
     "test_fleet.py": 60,
+    "test_fleet_chunked.py": 25,
     "test_cache_discover.py": 25,
 }
 
