@@ -9,11 +9,11 @@ measured, with the loop's own wall/CPU seconds per phase (its last progress line
 Reference, timed in the same run: loading the training CSV and calibrating the paper's model
 on it in this process (the loop's first step).
 
-With `--chunk N` the command runs a second time with `--chunk N` (the loop's fits accumulated
-over chunks of N samples), and the JSON adds that run's wall, CPU and peak resident memory and
-its precision: the largest relative difference of the final model's coefficients and of the
-reported errors (TEST and cross-validated) from the in-memory run, and whether the effects
-found are the same.
+With `--chunk N` (default 16384; 0: the in-memory run only) the command runs a second time
+with `--chunk N` (the loop's fits accumulated over chunks of N samples), and the JSON adds
+that run's wall, CPU and peak resident memory and its precision: the largest relative
+difference of the final model's coefficients and of the reported errors (TEST and
+cross-validated) from the in-memory run, and whether the effects found are the same.
 
     python benchmarks/bench_discover_long.py [--samples 1000000] [--chunk 16384]
 """
@@ -125,7 +125,7 @@ def _precision(ref: dict, other: dict) -> dict:
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--samples", type=int, default=1_000_000)
-    ap.add_argument("--chunk", type=int, default=0, help="also run with --chunk N (0: not)")
+    ap.add_argument("--chunk", type=int, default=16384, help="also run with --chunk N (0: not)")
     args = ap.parse_args()
     import numpy as np
     from bench_discover import EFFECTS, EXPECTED
