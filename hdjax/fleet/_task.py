@@ -15,7 +15,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from .._cache import enable_compilation_cache
-from .._errors import HdjaxError, ModelMismatchError
+from .._errors import DataError, HdjaxError, ModelMismatchError
 from .._formats import load_recording
 from .._io import ColumnMap
 from .._joint import Joint
@@ -226,6 +226,8 @@ def _estimate_streamed(spec, saved, joint, cmap) -> dict:
         if sum(k.shape[1] for k in kept) > 2 * KEPT_ROWS:  # thin what is kept: bounded
             stride *= 2
             kept = [np.concatenate(kept, axis=1)[:, ::2]]
+    if n == 0:
+        raise DataError(f"{spec['log']}: the log holds no samples")
     angles = np.concatenate(kept, axis=1)
     why = ratio_mismatch(
         saved.joint.ratio,
