@@ -173,23 +173,24 @@ def _carried_states(model):
 
 
 def _with_states(model, terms, carry: DahlCarry, win, lo: int, hi: int):
-    """The window with each carried state over its own rows `lo:hi` as an extra column (the
-    halo rows hold the neighbouring value; their estimates are not used)."""
+    """The window's signals with each carried state over its own rows `lo:hi` as an extra
+    column (the halo rows hold the neighbouring value; their estimates are not used)."""
     sig = signals(win, model.joint, velocity=model.velocity)
     own = jax.tree_util.tree_map(lambda x: x[lo:], sig)
-    extras = dict(win.extras)
+    extras = dict(sig.extras)
     for k, term in enumerate(terms):
         z = carry.column(k, term, own, None, hi - lo, numpy=False)
         full = np.empty(win.n_samples)
         full[:lo], full[lo:hi], full[hi:] = z[0], z, z[-1]
         extras[STATE_COLUMN.format(k)] = jnp.asarray(full)
-    return dataclasses.replace(win, extras=extras)
+    return eqx.tree_at(lambda s: s.extras, sig, extras)
 
 
 def model_estimates(model, stream: RecordingStream, chunk: int, *, need_torque: bool = True):
-    """The model's estimate (eqs. (26)-(27)) chunk by chunk: `(chunk, estimate)` for each
-    chunk of the stream, `chunk` the chunk's own rows (a [`hdjax.Recording`][]) and `estimate`
-    the [`hdjax.compliance.TorqueEstimate`][] of those rows, equal to the whole recording's.
+    """The model's estimate (eqs. (26)-(27)) chunk by chunk: `(rows, estimate)` for each
+    chunk of the stream, `rows` the chunk's own samples (a [`hdjax.Recording`][]) and
+    `estimate` the [`hdjax.compliance.TorqueEstimate`][] of those rows, equal to the whole
+    recording's.
 
     Velocities read a halo of neighbouring samples; a twist-driven hysteresis state (the
     residual loop's `hysteresis:torque`) is carried from each chunk into the next
@@ -205,13 +206,13 @@ def model_estimates(model, stream: RecordingStream, chunk: int, *, need_torque: 
     inner, carried = _carried_states(model)
     carry = DahlCarry()
     for win, lo, hi in windows(stream, before, after, pad, need_torque=need_torque):
+        data = win
         if carried:
             if lo == 0:  # a new recording: its state starts afresh
                 carry = DahlCarry()
-            win = _with_states(model, carried, carry, win, lo, hi)
-        est = estimate_torque(inner, win)
-        own = jax.tree_util.tree_map(lambda x: x[lo:hi], (win, est))
-        yield own
+            data = _with_states(model, carried, carry, win, lo, hi)
+        est = estimate_torque(inner, data)
+        yield jax.tree_util.tree_map(lambda x: x[lo:hi], (win, est))
 
 
 def estimate_model_streamed(model, stream: RecordingStream, n: int, chunk: int):
