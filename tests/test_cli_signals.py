@@ -163,3 +163,28 @@ def test_a_swallowed_interrupt_still_ends_the_command(tmp_path, monkeypatch, cap
     from hdjax._interrupts import pending
 
     assert pending() is None  # and the next command in this process starts clean
+
+
+def test_a_swallowed_interrupt_ends_the_timing_loop():
+    """The timing stage repeats one call up to a million times; a signal swallowed inside it
+    (as JAX's gc callback does) must end the loop, not leave the command running for minutes."""
+    from hdjax import _interrupts
+    from hdjax.pipelines._paper import time_per_100
+
+    from .helpers import sim_recording
+
+    rec = sim_recording(200, seed=1)
+    calls = []
+
+    def fn(r):
+        calls.append(1)
+        if len(calls) == 3:
+            try:
+                signal.raise_signal(signal.SIGINT)
+            except BaseException:  # what a callback that swallows exceptions does
+                pass
+        return r.n_samples
+
+    with pytest.raises(_interrupts.Interrupted), _interrupts.handling():
+        time_per_100(fn, rec, 1_000_000)
+    assert len(calls) == 3
