@@ -13,9 +13,13 @@ For each split this prints, as JSON:
   range;
 - a cross-refit: each split's effect set (its terms as found) refitted on every split, TEST RMS,
   so the difference between the splits' answers can be told apart from a difference in what
-  each split's data can show.
+  each split's data can show;
+- with `--refit KEYS` (repeatable; comma-separated effect keys): that effect set, each term as
+  the loop found it in the first split that found it, refitted on every split (TEST RMS and
+  its reduction from the split's starting model), to ask whether one set would serve all three.
 
     python benchmarks/lara8_splits.py [--out benchmarks/out/lara8_splits.json]
+        [--refit hysteresis:torque,coulomb:omega_l ...]
 """
 
 import argparse
@@ -84,16 +88,25 @@ def coverage(train, test) -> dict:
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out" / "lara8_splits.json")
+    ap.add_argument(
+        "--refit",
+        action="append",
+        default=[],
+        metavar="KEYS",
+        help="comma-separated effect keys, refitted on every split (repeatable)",
+    )
     args = ap.parse_args()
     t0 = time.perf_counter()
     meta = machine()  # the load at the start
     full, joint, opts = load()
     parts = {name: (full.select(~m), full.select(m)) for name, m in splits(full).items()}
-    rows, terms = [], {}
+    rows, terms, by_key = [], {}, {}
     for name, (train, test) in parts.items():
         res = discover(train, test, joint, opts)
         rec = res.aux
         terms[name] = list(res.value.effect_terms)
+        for key, term in zip(rec.effects, res.value.effect_terms):
+            by_key.setdefault(key, term)
         row = dict(
             split=name,
             train_samples=train.n_samples,
@@ -117,11 +130,29 @@ def main():
                 cross[found][name] = float(refit_structure(train, test, joint, tl, opts).rms)
             except HdjaxError as err:  # e.g. a compliance that is not invertible on this TRAIN
                 cross[found][name] = f"refused: {err}"
+    start = {r["split"]: r["test_rms_start"] for r in rows}
+    refits = {}
+    for keys in args.refit:
+        wanted = [k.strip() for k in keys.split(",") if k.strip()]
+        missing = [k for k in wanted if k not in by_key]
+        if missing:
+            refits[keys] = f"not found by the loop under any split: {', '.join(missing)}"
+            continue
+        refits[keys] = {}
+        for name, (train, test) in parts.items():
+            try:
+                found = [by_key[k] for k in wanted]
+                rms = float(refit_structure(train, test, joint, found, opts).rms)
+                refits[keys][name] = dict(test_rms=rms, reduction=1.0 - rms / start[name])
+            except HdjaxError as err:
+                refits[keys][name] = f"refused: {err}"
+        print(json.dumps({keys: refits[keys]}), flush=True)
     out = dict(
         benchmark="LARA8 joint 3, three splits",
         **meta,
         splits=rows,
         cross_refit_test_rms=cross,
+        refit_sets=refits,
         seconds=time.perf_counter() - t0,
     )
     args.out.parent.mkdir(parents=True, exist_ok=True)
