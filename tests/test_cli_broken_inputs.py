@@ -792,6 +792,37 @@ CASES = [
         ["byte position"],
     ),
     (
+        # a one-log split whose TEST part would be empty (2000 samples, TEST from row 3000)
+        "discover-config-test-blocks-leave-test-empty",
+        ["discover", "--config", "proj/disc.toml", "--out", "d"],
+        _set(
+            "proj/disc.toml",
+            JOINT + '[data]\npath = "train.csv"\ntest_blocks = { block = 1000, every = 4 }\n',
+        ),
+        2,
+        None,
+        ["2000 samples", "TEST would start at row 3000", "at most 500"],
+    ),
+    (
+        "discover-config-test-blocks-not-a-table",
+        ["discover", "--config", "proj/disc.toml", "--out", "d"],
+        _set("proj/disc.toml", JOINT + '[data]\npath = "train.csv"\ntest_blocks = 4\n'),
+        2,
+        None,
+        ["test_blocks", "{ block = 100, every = 4 }"],
+    ),
+    (
+        "discover-config-test-blocks-fractional",
+        ["discover", "--config", "proj/disc.toml", "--out", "d"],
+        _set(
+            "proj/disc.toml",
+            JOINT + '[data]\npath = "train.csv"\ntest_blocks = { block = 12.5 }\n',
+        ),
+        2,
+        None,
+        ["block must be a whole number >= 1", "12.5"],
+    ),
+    (
         "discover-unknown-option",
         DISC + ["--out", "d", "--ignore-collumn", "x"],
         _nothing,

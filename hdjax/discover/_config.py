@@ -74,11 +74,17 @@ def load_discover_config(path):
     if "path" in data:
         rec, described = load(here / data["path"])
         notes.append(described)
-        blocks = data.get("test_blocks", {"block": 100, "every": 4})
-        block, every = int(blocks.get("block", 100)), int(blocks.get("every", 4))
-        if block < 1 or every < 2:
-            raise ConfigError(f"{path} [data] test_blocks: need block >= 1 and every >= 2")
-        idx = np.arange(rec.n_samples) // block
+        block, every = _test_blocks(data.get("test_blocks", {}), f"{path} [data] test_blocks")
+        n = rec.n_samples
+        if n <= (every - 1) * block:
+            # blocks 0 .. every-2 are TRAIN: TEST starts at row (every - 1) * block
+            raise ConfigError(
+                f"{path} [data] test_blocks: the log has {n} samples, but every {every}th block "
+                f"of {block} samples is TEST, so TEST would start at row {(every - 1) * block} "
+                f"and is empty; give a smaller block (at most {max(1, n // every)} for every = "
+                f"{every}), or separate 'train' and 'test' logs"
+            )
+        idx = np.arange(n) // block
         train, test = rec.select(idx % every != every - 1), rec.select(idx % every == every - 1)
         notes.append(
             f"one log split into TRAIN and TEST: every {every}th block of {block} samples is TEST"
@@ -91,3 +97,18 @@ def load_discover_config(path):
     options = doc.get("discover", {})
     check_keys(options, _DISCOVER_KEYS, f"{path} [discover]")
     return train, test, joint, options, notes
+
+
+def _test_blocks(blocks, where: str) -> tuple[int, int]:
+    """`(block, every)` of a `test_blocks = { block = B, every = E }` table (100 and 4 by
+    default), checked: whole numbers, `block >= 1`, `every >= 2`."""
+    if not isinstance(blocks, dict):
+        raise ConfigError(f"{where}: expected a table like {{ block = 100, every = 4 }}")
+    check_keys(blocks, ("block", "every"), where)
+    out = []
+    for key, default, least in (("block", 100, 1), ("every", 4, 2)):
+        v = blocks.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, int) or v < least:
+            raise ConfigError(f"{where}: {key} must be a whole number >= {least}, got {v!r}")
+        out.append(v)
+    return out[0], out[1]
