@@ -45,6 +45,7 @@ from .._solution import RESULTS, Solution
 from ..compliance import ComplianceModel, merge_sparse_segments
 from ..compliance._lstsq import CalibrationData, failure_message, prepare
 from ..effects import AbstractTerm
+from ._aliases import find_aliases
 from ._chunked import Chunks, DahlCarry, check_chunk, sequential
 from ._chunked_fits import twist_residual
 from ._folds import (
@@ -134,6 +135,9 @@ class DiscoveryStep:
     cv_torque_rms: float = float("nan")
     cv_twist_rms_arcsec: float = float("nan")
     amplitude: dict | None = None
+    aliases: list[dict] = dataclasses.field(default_factory=list)
+    """Candidates TRAIN cannot tell apart from this one: `{"key", "cosine"}`, the smallest
+    principal-angle cosine between the centred column spans (at least 0.99)."""
 
 
 @dataclasses.dataclass
@@ -719,6 +723,10 @@ def _discover(train, test, joint, options, progress) -> Solution:
             break
         best = _parsimonious(trials, cv, blocks, options, notes)
         _, cand, gain, folds_, stab, new_model, new_est, new_cv = best
+        with phase("aliases"):
+            # on the signals the candidates were scored on (the model before this step)
+            others = [(r[0].key, r[0].term) for r in ranked[:10] if r[0].key != cand.key]
+            aliases = find_aliases(cand.term, others, *training_data(model, data, est_train))
         with phase("test"):
             metrics, est = _test_errors(new_model, test_data, joint.rated_torque)
             twist_rms = _twist_rms(new_model, test_data, chunk=options.chunk)
@@ -739,6 +747,7 @@ def _discover(train, test, joint, options, progress) -> Solution:
                 stability=stab,
                 ranking=ranking,
                 spectra=spectra,
+                aliases=aliases,
             )
         )
         say(

@@ -62,6 +62,7 @@ def report_dict(solution: Solution, *, extra: dict | None = None) -> dict:
                 "amplitude": s.amplitude,
                 "term": s.term.names(),
                 "ranking": s.ranking,
+                "aliases": s.aliases,
             }
             for s in result.steps
         ],
@@ -228,6 +229,12 @@ def report_markdown(d: dict, figures: list[tuple[str, str]]) -> str:
             f"{s['cv_torque_rms']:.4g} | {s['cv_twist_rms_arcsec']:.4g} | {s['cv_gain']:.1%} | "
             f"{s['stability']:.0%} | {amp} |"
         )
+    aliased = [(i, s) for i, s in enumerate(d["steps"], 1) if s.get("aliases")]
+    if aliased:
+        lines += ["", "Effects TRAIN cannot tell apart (columns spanning the same directions):", ""]
+        for i, s in aliased:
+            alt = ", ".join(f"`{a['key']}` (cosine {a['cosine']:.4f})" for a in s["aliases"])
+            lines.append(f"- step {i}, `{s['effect']}`: indistinguishable from {alt}")
     lines += ["", f"Stopping rule: {d['stopping_rule']}.", ""]
     if d.get("unexplained"):
         lines += ["Left unexplained (structure above the noise in the final TRAIN residual):", ""]
