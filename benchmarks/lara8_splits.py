@@ -6,8 +6,8 @@ how far each TEST sample lies from the nearest TRAIN sample in angle and torque:
 interleave (TEST lies between TRAIN samples), long blocks leave whole angle ranges to TEST alone.
 For each split this prints, as JSON:
 
-- the effects the loop adds, TEST RMS start -> end, the reduction, each step's stability and
-  cross-validated torque RMS;
+- the effects the loop adds, TEST RMS start -> end, the reduction, each step's stability,
+  cross-validated torque RMS and aliases (candidates TRAIN cannot tell apart from it);
 - the coverage of TEST by TRAIN: the largest and the median distance [deg] from a TEST sample to
   the nearest TRAIN output angle, and the share of TEST samples whose torque lies outside TRAIN's
   range;
@@ -116,6 +116,7 @@ def main():
             test_rms_end=rec.final.rms,
             reduction=1.0 - rec.final.rms / rec.baseline.rms,
             stability=[s.stability for s in rec.steps],
+            aliases=[[a["key"] for a in s.aliases] for s in rec.steps],
             cv_torque_rms=[rec.baseline_cv_torque_rms] + [s.cv_torque_rms for s in rec.steps],
             **coverage(train, test),
         )
