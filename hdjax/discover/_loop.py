@@ -754,6 +754,11 @@ def _discover(train, test, joint, options, progress) -> Solution:
             f"step {len(steps)}: added {cand.key} (CV twist gain {gain:.1%}, stability "
             f"{stab:.0%}, CV torque {new_cv.torque_rms:.4g} N·m); test torque RMS "
             f"{metrics.rms:.4g} N·m, max {metrics.max:.4g} N·m"
+            + (
+                "; TRAIN cannot tell it apart from " + ", ".join(a["key"] for a in aliases)
+                if aliases
+                else ""
+            )
         )
         before = steps[-2].test.rms if len(steps) > 1 else base_metrics.rms
         if metrics.rms > before:
