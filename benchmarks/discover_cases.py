@@ -234,27 +234,13 @@ def _two(scenario, params, duration):
 
 
 def lara8_splits():
-    """Joint 3 of the LARA8 log under three TRAIN/TEST splits."""
-    from hdjax._formats import load_recording
-    from hdjax._io import ColumnMap, read_toml
-    from hdjax.discover._config import load_discover_config
+    """Joint 3 of the LARA8 log under the three TRAIN/TEST splits of `lara8_splits.py`."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from lara8_splits import load, splits
 
-    cfg_path = ROOT / "experiments" / "lara8_discover.toml"
-    _, _, joint, cfg, _ = load_discover_config(cfg_path)
-    doc = read_toml(cfg_path)
-    data = doc["data"]
-    colmap = ColumnMap.from_dict({k: data[k] for k in ("columns", "extras") if k in data})
-    full = load_recording(cfg_path.parent / data["path"], colmap)
-    t = np.asarray(full.t) - float(np.asarray(full.t)[0])
-    idx = np.arange(full.n_samples) // 100
-    splits = {
-        "alternating 0.5 s blocks": np.floor(t / 0.5).astype(int) % 2 == 1,
-        "alternating 2 s blocks": np.floor(t / 2.0).astype(int) % 2 == 1,
-        "every 4th block of 100 samples": idx % 4 == 3,
-    }
+    full, joint, opts = load()
     rows = []
-    opts = DiscoverOptions(max_effects=int(cfg.get("max_effects", 5)))
-    for name, is_test in splits.items():
+    for name, is_test in splits(full).items():
         train, test = full.select(~is_test), full.select(is_test)
         res = discover(train, test, joint, opts)
         rows.append(
