@@ -78,15 +78,31 @@ def handling():
         yield
         return
     old = {s: signal.getsignal(s) for s in _SIGNALS}
+    old_hook = sys.unraisablehook
     _pending = None
     for s in _SIGNALS:
         signal.signal(s, _handler)
+    sys.unraisablehook = _quiet_unraisable(old_hook)
     try:
         yield
     finally:
         for s, h in old.items():
             signal.signal(s, h if h is not None else signal.SIG_DFL)
+        sys.unraisablehook = old_hook
         _pending = None  # reported by the command; the next one starts clean
+
+
+def _quiet_unraisable(fallback):
+    """An `sys.unraisablehook` that drops an [`Interrupted`][] raised inside a callback Python
+    runs on its own (it would print "Exception ignored in ..." and a traceback): the signal is
+    remembered and [`check`][] raises it again. Anything else goes to `fallback`."""
+
+    def hook(unraisable):
+        if isinstance(unraisable.exc_value, Interrupted):
+            return
+        fallback(unraisable)
+
+    return hook
 
 
 def _exit_now(signum, frame):

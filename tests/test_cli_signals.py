@@ -188,3 +188,35 @@ def test_a_swallowed_interrupt_ends_the_timing_loop():
     with pytest.raises(_interrupts.Interrupted), _interrupts.handling():
         time_per_100(fn, rec, 1_000_000)
     assert len(calls) == 3
+
+
+def test_an_interrupt_swallowed_by_a_gc_callback_prints_no_traceback(capsys, monkeypatch):
+    """Python reports an exception raised inside a garbage-collection callback (as JAX's is) to
+    `sys.unraisablehook`, which prints "Exception ignored in ..." and a traceback; while a
+    command runs, the interrupt is kept quiet (and remembered) and anything else passed on."""
+    import gc
+
+    from hdjax import _interrupts
+
+    seen = []  # the hook in place before the command: Python's printer, here a recorder
+    monkeypatch.setattr(sys, "unraisablehook", lambda u: seen.append(type(u.exc_value)))
+
+    def ctrl_c(phase, info):
+        if phase == "start":
+            signal.raise_signal(signal.SIGINT)
+
+    def broken(phase, info):
+        if phase == "start":
+            raise ValueError("a real bug in a callback")
+
+    with pytest.raises(_interrupts.Interrupted), _interrupts.handling():
+        for callback in (ctrl_c, broken):
+            gc.callbacks.append(callback)
+            try:
+                gc.collect()
+            finally:
+                gc.callbacks.remove(callback)
+        assert _interrupts.pending() == signal.SIGINT
+        assert seen == [ValueError]
+        _interrupts.check()
+    assert capsys.readouterr().err == ""
