@@ -607,8 +607,9 @@ def _discover(train, test, joint, options, progress) -> Solution:
     phase = Phases()
     with phase("baseline"):
         model = baseline_model = calibrate_baseline(train, joint, options, notes)
-        data = _as_data(model, train)
-        test_data = _as_data(model, test)
+        # with a chunk, estimates run chunk by chunk too (see PipelineData.chunk)
+        data = dataclasses.replace(_as_data(model, train), chunk=options.chunk)
+        test_data = dataclasses.replace(_as_data(model, test), chunk=options.chunk)
     n_gaps = int(data.starts.sum()) - 1
     if n_gaps:
         notes.append(

@@ -19,6 +19,7 @@ import dataclasses
 import warnings
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
@@ -49,6 +50,9 @@ class PipelineData:
     sig: Signals
     torque: Float[np.ndarray, " n"]
     starts: Bool[np.ndarray, " n"]
+    chunk: int = 0
+    """With a chunk (the loop's `chunk` setting), `estimate` inverts a model without a
+    path term chunk by chunk, so its program's working memory is bounded by the chunk."""
 
     @property
     def n(self) -> int:
@@ -273,7 +277,27 @@ def estimate(model: ComplianceModel, data: PipelineData) -> Float[np.ndarray, " 
     for term, c in linear:
         gi = _torque_gain(term, sig, c)
         g = gi if g is None else _gain_sum(g, gi)
+    if data.chunk and data.n > data.chunk and not has_path(core):
+        return _invert_in_chunks(core, sig, r, g, data.chunk)
     return np.asarray(_invert_rest(core, sig, r, g).torque)
+
+
+def _invert_in_chunks(core: ComplianceModel, sig: Signals, r, g, chunk: int) -> np.ndarray:
+    """[`_invert_rest`][] over consecutive chunks of `chunk` samples (the last one padded with
+    its final sample, so one program serves every chunk). Exact for a model without a path
+    term: the inversion is pointwise, a fixed number of Newton steps per sample (eq. (27))."""
+    n = int(np.asarray(r).shape[0])
+    out = np.empty(n)
+    for lo in range(0, n, chunk):
+        hi = min(n, lo + chunk)
+
+        def take(x, lo=lo, hi=hi):
+            part = np.asarray(x)[lo:hi]
+            return part if hi - lo == chunk else np.pad(part, (0, chunk - (hi - lo)), "edge")
+
+        part = _invert_rest(core, jax.tree.map(take, sig), take(r), None if g is None else take(g))
+        out[lo:hi] = np.asarray(part.torque)[: hi - lo]
+    return out
 
 
 def quiet_calibrate(model, pair, notes, throw=True, chunk: int = 0):
