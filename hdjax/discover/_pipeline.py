@@ -266,7 +266,9 @@ def estimate(model: ComplianceModel, data: PipelineData) -> Float[np.ndarray, " 
     The torque-free and linear effect groups are evaluated one compiled program per group
     (as [`design_by_terms`][] does), and the inversion proper runs on the model without them:
     every structure that differs only in such groups shares one compiled inversion (the same
-    numbers, bit for bit, as [`hdjax.compliance.estimate_torque`][]'s single program).
+    numbers, bit for bit, as [`hdjax.compliance.estimate_torque`][]'s single program). With
+    `data.chunk`, a model without a path term is inverted chunk by chunk (the same to about
+    1e-13: XLA may round a chunk's fused operations differently).
     """
     core, free, linear = _inversion_core(canonical(model))
     sig = data.sig
