@@ -155,8 +155,36 @@ def test_chunked_cross_validation_equals_in_memory(base, path):
     assert abs(part.torque_rms / whole.torque_rms - 1) < RTOL
     assert abs(part.twist_rms_arcsec / whole.twist_rms_arcsec - 1) < RTOL
     assert _rel(part.fold_torque_rms, whole.fold_torque_rms) < RTOL
-    for a, b in zip(part.estimates, whole.estimates):
-        assert _rel(a, b) < RTOL
+    for f in range(len(folds)):
+        assert _rel(part.fold_estimate(f, data), whole.fold_estimate(f, data)) < RTOL
+
+
+@pytest.mark.parametrize("chunk", [0, 997])
+def test_cross_validation_keeps_no_record_per_fold(base, chunk):
+    """A structure's cross-validation holds one full-length vector (the squared errors), not
+    one estimate per fold; the fold estimates it gives back on demand are those that scored
+    it (each fold's held-out RMS recomputed from them, bit for bit)."""
+    model, data = base
+    blocks = contiguous_blocks(data.starts, 230)
+    folds = fold_assignment(blocks, 5)
+    fitted, _ = pipe.calibrate(
+        model.with_effects(Hysteresis(torque_scale=0.05 * RATED)), data, [],
+        pipe.estimate(model, data),
+    )  # fmt: skip
+    cv = pipe.cross_validate(fitted, data, folds, chunk=chunk)
+    full_length = [
+        name
+        for name, value in vars(cv).items()
+        for leaf in (value if isinstance(value, list) else [value])
+        if isinstance(leaf, np.ndarray) and leaf.size >= data.n
+    ]
+    assert full_length == ["squared_errors"]
+    for f in range(len(folds)):
+        sq = cv.squared_errors[folds[f]]
+        scored = ~np.isnan(sq)
+        est = cv.fold_estimate(f, data)
+        e = est[folds[f]][scored] - data.torque[folds[f]][scored]
+        assert float(np.sqrt(np.sum(e**2) / scored.sum())) == cv.fold_torque_rms[f]
 
 
 def test_chunked_candidate_scores_equal_in_memory(base):

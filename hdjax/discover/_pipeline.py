@@ -350,12 +350,20 @@ class CrossValidation:
     torque_rms: float
     twist_rms_arcsec: float
     fold_torque_rms: list[float]
-    estimates: list[np.ndarray]
-    """Per fold, the fold model's estimate over the whole record (the next structure's
-    driver rounds start from it)."""
+    fold_models: list[ComplianceModel]
+    """Per fold, the model calibrated on the fold's training part. The next structure's
+    driver rounds start from its estimate over the whole record
+    (`fold_estimate`), recomputed when asked for rather than kept: a
+    structure holds no full-length vector per fold, and the loop's memory does not grow by
+    `n_folds` records per candidate tried."""
     squared_errors: np.ndarray | None = None
     """Per TRAIN sample, the squared held-out torque error of the fold that holds it out (NaN
     where it is not scored): candidates are compared block by block on the same samples."""
+
+    def fold_estimate(self, f: int, data: PipelineData) -> np.ndarray:
+        """Fold `f`'s torque estimate over the whole of `data` (the record it was
+        cross-validated on): the same numbers, bit for bit, as the estimate that scored it."""
+        return estimate(self.fold_models[f], data)
 
 
 def _fold_solve(a: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -460,7 +468,7 @@ def cross_validate(
     y = data.twist
     n = data.n
     rounds = DRIVER_ROUNDS if path else 1
-    sse_t, sse_w, cnt, per_fold, ests = 0.0, 0.0, 0, [], []
+    sse_t, sse_w, cnt, per_fold, fold_models = 0.0, 0.0, 0, [], []
     sq = np.full(n, np.nan)
     model = canonical(model)
     torque = jnp.asarray(data.torque)
@@ -487,7 +495,11 @@ def cross_validate(
     for f, te in enumerate(folds):
         train_rows = np.ones(n, bool)
         train_rows[te] = False
-        driver = previous.estimates[f] if (path and previous is not None) else data.torque * 0.0
+        driver = (
+            previous.fold_estimate(f, data)
+            if (path and previous is not None)
+            else data.torque * 0.0
+        )
         for _ in range(rounds):
             if fixed_solver is not None:
                 solver = fixed_solver
@@ -512,7 +524,7 @@ def cross_validate(
         sse_t += sse
         cnt += te.size
         per_fold.append(float(np.sqrt(sse / max(te.size, 1))))
-        ests.append(est)
+        fold_models.append(fold_model)
     # no held-out sample inside the folds' calibrated ranges: the error is unknown (NaN), so no
     # step can be accepted on it (a zero here would accept anything)
     none = np.nan if cnt == 0 else 0.0
@@ -520,7 +532,7 @@ def cross_validate(
         torque_rms=float(np.sqrt(sse_t / max(cnt, 1))) + none,
         twist_rms_arcsec=float(np.sqrt(sse_w / max(cnt, 1)) * 180 * 3600 / np.pi) + none,
         fold_torque_rms=per_fold,
-        estimates=ests,
+        fold_models=fold_models,
         squared_errors=sq,
     )
 
