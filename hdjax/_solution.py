@@ -48,7 +48,7 @@ class RESULTS(eqx.Enumeration):
         "scales (angles in radians, current in amperes)"
     )
     twist_reversed = (
-        "the twist falls as torque rises in every segment: the encoders count against the "
+        "the twist falls as torque rises over the data: the encoders count against the "
         "torque, so set twist_sign = -1 in the [joint] table"
     )
 

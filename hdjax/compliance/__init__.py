@@ -38,6 +38,11 @@ from ._rls import (
     rls_step as rls_step,
 )
 from ._segments import merge_sparse_segments as merge_sparse_segments
+from ._shape import (
+    SLOPE_FLOOR as SLOPE_FLOOR,
+    ShapeConstraint as ShapeConstraint,
+    ShapeData as ShapeData,
+)
 from ._signals import Signals as Signals, signals_from_recording as signals_from_recording
 from ._stream import NormalEquations as NormalEquations, StreamingQR as StreamingQR
 from ._stream_fit import (

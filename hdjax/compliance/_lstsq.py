@@ -40,13 +40,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import ArrayLike, Float
+from .._custom_types import ArrayLike, Float, Int
 from .._errors import CalibrationError, DataError, InversionError
 from .._features import signals
 from .._recording import Recording
 from .._solution import RESULTS, Solution
 from ..effects import TORQUE_PATH
 from ._model import ComplianceModel, base_term_columns
+from ._shape import ShapeConstraint, ShapeData, torque_grid
 from ._signals import Signals
 from ._stream import scaled_cholesky
 
@@ -172,10 +173,16 @@ class _SegmentedDesign:
     dense products (NumPy/BLAS), and the $n \\times p$ design is never formed.
     """
 
-    def __init__(self, model: ComplianceModel, sig: Signals, torque):
+    def __init__(self, model: ComplianceModel, sig: Signals, torque, rows=None):
         cols, seg = _compact_column_list(model, sig, torque)
         x = np.stack([np.asarray(c) for c in cols])  # q x n, rows contiguous for BLAS
+        twist, torque = np.asarray(sig.twist), np.asarray(torque)
+        if rows is not None:
+            # the columns of every row (memory states run through them all), then the rows
+            x, seg, twist, torque = x[:, rows], np.asarray(seg)[rows], twist[rows], torque[rows]
         self.p = model.n_coef
+        self.shape = ShapeData(model)
+        self.shape.add(x, twist, torque)
         self.blocks = []
         if model.per_segment:
             seg = np.asarray(seg)
@@ -293,7 +300,12 @@ def check_sample_count(n: int, p: int) -> None:
 
 
 def calibrate_lstsq(
-    model: ComplianceModel, data: CalibrationData, *, throw: bool = True
+    model: ComplianceModel,
+    data: CalibrationData,
+    *,
+    throw: bool = True,
+    monotone: bool = True,
+    rows: Int[ArrayLike, " m"] | None = None,
 ) -> Solution:
     """Calibrate by linear least squares (Song et al. eqs. (15)-(17)), column-scaled (see module).
 
@@ -304,6 +316,13 @@ def calibrate_lstsq(
     - `throw`: raise on a rank-deficient design or a non-invertible compliance (default); with
       `False` the problem is returned as the solution's `result` (`RESULTS.rank_deficient`,
       `RESULTS.not_invertible` or `RESULTS.twist_reversed`).
+    - `monotone`: constrain the twist to increase with torque everywhere (the
+      shape-constrained least squares of [`hdjax.compliance.ShapeConstraint`][], default); where the
+      plain solution already does, it is returned unchanged. `False`: eq. (17) as the paper
+      writes it.
+    - `rows`: the indices of the samples to fit (default all). The columns are computed over
+      the whole record first, so memory states and derivatives run through the rows left out
+      (a TRAIN part cut from one log with TEST blocks between).
 
     **Returns:** an [`hdjax.Solution`][] whose `value` is the calibrated
     [`hdjax.compliance.ComplianceModel`][]; its `stats` are listed in the module docstring.
@@ -314,10 +333,12 @@ def calibrate_lstsq(
     """
     t0 = time.perf_counter()
     sig, torque = prepare(model, data)
-    n = sig.n_samples
-    t_np = np.asarray(torque)
-    b = np.asarray(sig.twist, np.float64)
-    design = _SegmentedDesign(model, sig, torque)
+    rows = None if rows is None else np.asarray(rows, np.int64)
+    pick = (lambda x: x) if rows is None else (lambda x: x[rows])
+    t_np = pick(np.asarray(torque))
+    b = pick(np.asarray(sig.twist, np.float64))
+    n = b.size
+    design = _SegmentedDesign(model, sig, torque, rows)
     g, atb = design.normal_equations(b)
     # a column is zero over the data exactly when its sum of squares is
     active, counts, dropped = _select_active(model, np.diag(g) > 0, t_np)
@@ -328,7 +349,16 @@ def calibrate_lstsq(
         coef, cond = fast
         solved = (coef, p, cond, ())
     else:
-        solved = _qr_solve(model, sig, torque, active, throw)
+        solved = _qr_solve(model, sig, torque, active, throw, rows)
+    solved, shape = constrain_shape(
+        model,
+        solved,
+        g,
+        active,
+        design.shape,
+        monotone,
+        lambda x, d=design: d.residual_and_atr(b, x)[1],
+    )
     resid, _ = design.residual_and_atr(b, solved[0])
     del design
     calibrated = [s_ for s_ in range(model.n_segments) if active[s_]]
@@ -345,7 +375,29 @@ def calibrate_lstsq(
         segment_counts=counts,
         dropped=dropped,
         t0=t0,
+        shape=shape,
     )
+
+
+def constrain_shape(
+    model, solved: tuple, g, active, data: ShapeData, monotone: bool, residual_pass=None
+):
+    """The solve's `(coef, rank, condition, collinear)` with the coefficients projected onto
+    the shape constraint ([`hdjax.compliance.ShapeConstraint`][]) when `monotone` and
+    the design has full rank (refined with `residual_pass`, $x \\mapsto A^\\top(b - Ax)$), and
+    the shape record `calibration_solution` keeps: the constraint (or `None`) and the data's
+    overall compliance."""
+    coef, rank, cond, collinear = solved
+    shape = {"constraint": None, "compliance": data.compliance()}
+    if not monotone or rank < int(np.sum(active)):
+        return solved, shape
+    constraint = ShapeConstraint.of(model, data, active)
+    if constraint is None:
+        return solved, shape
+    shape["constraint"] = constraint
+    shape["unconstrained_violation"] = constraint.violation(coef)
+    shape["unconstrained_k"] = tuple(float(k) for k in np.asarray(coef)[: model.n_segments])
+    return (constraint.solve(coef, g, active, residual_pass), rank, cond, collinear), shape
 
 
 def calibration_solution(
@@ -360,6 +412,7 @@ def calibration_solution(
     segment_counts,
     dropped: Sequence[str],
     t0: float,
+    shape: dict | None = None,
 ) -> Solution:
     """The [`hdjax.Solution`][] of a calibration of `model`, batch or streamed.
 
@@ -367,11 +420,14 @@ def calibration_solution(
     `torque_range` ([`fitted_model`][]); its result a rank-deficient design first, then a
     non-invertible compliance, else success; its stats those of the module docstring.
     `solved` is the solve's `(coef, rank, condition, collinear)`, `t0` the
-    `time.perf_counter()` the fit started at.
+    `time.perf_counter()` the fit started at, `shape` the record of [`constrain_shape`][].
     """
     coef, rank, condition, collinear = solved
     n_terms = int(np.sum(active))
-    fitted, invertible = fitted_model(model, coef, active, torque_range, dropped, throw)
+    shape = shape or {"constraint": None, "compliance": float("nan")}
+    fitted, invertible = fitted_model(
+        model, coef, active, torque_range, dropped, throw, shape["compliance"]
+    )
     result = RESULTS.rank_deficient if rank < n_terms else invertible
     stats = {
         "rank": rank,
@@ -383,8 +439,33 @@ def calibration_solution(
         "dropped": dropped,
         "collinear": collinear,
         "fit_time_s": time.perf_counter() - t0,
+        "data_compliance": shape["compliance"],
+        "shape_constraint": shape["constraint"],
+        "constrained": _constrained_notes(fitted, shape),
+        "unconstrained_k": shape.get("unconstrained_k"),
     }
     return Solution(fitted, result, stats)
+
+
+def _constrained_notes(model: ComplianceModel, shape: dict) -> tuple[str, ...]:
+    """What the shape constraint changed, for a user: the segments held at the slope floor."""
+    c = shape["constraint"]
+    if c is None or not shape.get("unconstrained_violation", 0.0) > 0.0:
+        return ()
+    tight = c.active_segments(np.asarray(model.coef), model.n_segments)
+    names = [
+        f"{name} [{lo:.4g}, {hi:.4g}) N·m"
+        for name, (lo, hi), t in zip(model.k_names, model.segment_bounds, tight)
+        if t
+    ]
+    return (
+        "the least-squares compliance was not increasing with torque; calibrated under the "
+        f"constraint that its slope stays at least {c.floor:.3g} rad/(N·m) "
+        f"({c.floor / c.compliance:.0%} of the data's compliance), held at that floor in "
+        + (", ".join(names) if names else "the torque-dependent effects")
+        + ": the data there does not determine the compliance (record more torque range, or "
+        "use fewer segments)",
+    )
 
 
 def calibration_messages(solution: Solution) -> list[str]:
@@ -400,9 +481,10 @@ def calibration_messages(solution: Solution) -> list[str]:
     """
     st = solution.stats
     out = [f"left out: {d}" for d in st["dropped"]]
+    out += list(st.get("constrained", ()))
     if st["rank"] < st["n_terms"]:
         out.append(rank_message(st["rank"], st["n_terms"], st["collinear"]))
-    msg = check_invertible(solution.value)
+    msg = check_invertible(solution.value, st.get("data_compliance"))
     if msg:
         out.append(msg)
     return out
@@ -414,7 +496,7 @@ def failure_message(solution: Solution) -> str:
     st = solution.stats
     if solution.result == RESULTS.rank_deficient:
         return rank_message(st["rank"], st["n_terms"], st["collinear"])
-    return check_invertible(solution.value) if not solution.ok else ""
+    return check_invertible(solution.value, st.get("data_compliance")) if not solution.ok else ""
 
 
 def rank_message(rank: int, p: int, collinear) -> str:
@@ -428,10 +510,13 @@ def rank_message(rank: int, p: int, collinear) -> str:
     )
 
 
-def _qr_solve(model, sig, torque, active, throw):
-    """Scaled Householder QR on the dense design: rank, condition and (if full rank) solution."""
-    A = _design(model, sig, torque)
-    qtb, r, scale = _scaled_qr(A, sig.twist, jnp.asarray(active))
+def _qr_solve(model, sig, torque, active, throw, rows=None):
+    """Scaled Householder QR on the dense design (of the rows `rows`, default all): rank,
+    condition and (if full rank) solution."""
+    A, b = _design(model, sig, torque), sig.twist
+    if rows is not None:
+        A, b = A[rows], b[rows]
+    qtb, r, scale = _scaled_qr(A, b, jnp.asarray(active))
     return solve_from_r(model, np.asarray(r), np.asarray(qtb), np.asarray(scale), active, throw)
 
 
@@ -466,16 +551,17 @@ def _solve_tri(r, b):
     return scipy.linalg.solve_triangular(r, b, lower=False)
 
 
-def fitted_model(model, coef, active, torque_range, dropped, throw):
+def fitted_model(model, coef, active, torque_range, dropped, throw, data_compliance=None):
     """`model` with the solved coefficients, its active terms and calibrated torque range, and
     whether it can be inverted (a [`hdjax.RESULTS`][] member); an `InversionError` when it
     cannot and `throw`, and a warning naming the terms the data could not reach. Shared by the
-    batch and streamed fits."""
+    batch and streamed fits. `data_compliance` (the twist's least-squares slope on the torque
+    over the data) decides whether the encoders count against the torque."""
     fitted = eqx.tree_at(lambda m: m.coef, model, jnp.asarray(coef))
     fitted = _with_static(fitted, active=tuple(bool(a) for a in active), torque_range=torque_range)
-    invertible = invertibility(fitted)
+    invertible = invertibility(fitted, data_compliance)
     if invertible != RESULTS.successful and throw:
-        raise InversionError(check_invertible(fitted))
+        raise InversionError(check_invertible(fitted, data_compliance))
     if dropped:
         warnings.warn(
             "calibration left out terms the data cannot reach: " + "; ".join(dropped),
@@ -484,16 +570,23 @@ def fitted_model(model, coef, active, torque_range, dropped, throw):
     return fitted, invertible
 
 
-def invertibility(model: ComplianceModel) -> RESULTS:
+def invertibility(model: ComplianceModel, data_compliance: float | None = None) -> RESULTS:
     """`RESULTS.successful` when the calibrated compliance can be inverted for torque;
-    `RESULTS.twist_reversed` when the twist falls with torque in every segment, else
-    `RESULTS.not_invertible` (see [`check_invertible`][])."""
-    if not check_invertible(model):
+    `RESULTS.twist_reversed` when the twist falls with torque over the data (or, without
+    `data_compliance`, in every segment), else `RESULTS.not_invertible` (see
+    [`check_invertible`][])."""
+    if not check_invertible(model, data_compliance):
         return RESULTS.successful
+    return RESULTS.twist_reversed if _reversed(model, data_compliance) else RESULTS.not_invertible
+
+
+def _reversed(model: ComplianceModel, data_compliance: float | None) -> bool:
+    """Whether the twist falls as torque rises: over the data when its overall slope is
+    known, else in every calibrated segment."""
+    if data_compliance is not None and np.isfinite(data_compliance):
+        return data_compliance < 0
     k = np.asarray(model.k)
-    if all(kj < 0 for kj, a in zip(k, model.active) if a):
-        return RESULTS.twist_reversed
-    return RESULTS.not_invertible
+    return all(kj < 0 for kj, a in zip(k, model.active) if a)
 
 
 def _with_static(model: ComplianceModel, **changes) -> ComplianceModel:
@@ -502,11 +595,13 @@ def _with_static(model: ComplianceModel, **changes) -> ComplianceModel:
     return ComplianceModel(**d)
 
 
-def check_invertible(model: ComplianceModel) -> str:
+def check_invertible(model: ComplianceModel, data_compliance: float | None = None) -> str:
     """An explanation if the calibrated compliance is not increasing in torque, else `""`.
 
     Every calibrated segment compliance $k_j$ must be positive for the inversion of eq. (27) to
-    exist (a twist that falls as torque rises means the encoders count the other way).
+    exist. A twist that falls as torque rises over the data (`data_compliance`, its
+    least-squares slope on the torque, negative; without it: every $k_j$ negative) means the
+    encoders count the other way, and only then is `twist_sign = -1` suggested.
     """
     k = np.asarray(model.k)
     bad = [
@@ -517,9 +612,9 @@ def check_invertible(model: ComplianceModel) -> str:
     if not bad:
         return _check_nonlinear_slope(model, k)
     hint = ""
-    if all(kj < 0 for kj, a in zip(k, model.active) if a):
+    if _reversed(model, data_compliance):
         hint = (
-            " The twist falls as torque rises in every segment: the encoders count against the "
+            " The twist falls as torque rises over the data: the encoders count against the "
             "torque, so set twist_sign = -1 in the [joint] table."
         )
     return (
@@ -539,9 +634,7 @@ def _check_nonlinear_slope(model: ComplianceModel, k: np.ndarray) -> str:
         i += m
     if not terms:
         return ""
-    lo = min(model.torque_range[0], -model.rated_torque)
-    hi = max(model.torque_range[1], model.rated_torque)
-    grid = np.linspace(lo, hi, 801)
+    grid = torque_grid(model)
     seg = np.searchsorted(np.asarray(model.knots), grid, side="right")
     act = np.asarray(model.active[: model.n_segments])
     slope = np.where(act[seg], k[seg], np.nan)

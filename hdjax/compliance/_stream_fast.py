@@ -56,6 +56,8 @@ def fused_columns(model, win, w, z0s):
             du = jnp.diff(driver, prepend=prev[None]) * w / term.torque_scale
             z_end, z = _dahl(du, z0)
             z_ends.append(jnp.stack([z_end, driver[last_row]]))
+            if getattr(term, "lag", False):  # one sample late (TwistHysteresis' column)
+                z = jnp.concatenate([z0[None], z[:-1]])
             cols.append(z)
             k += 1
             continue

@@ -37,10 +37,12 @@ from ._lstsq import (
     _compact_index,
     calibration_solution,
     check_sample_count,
+    constrain_shape,
     select_active_counts,
     solve_from_r,
 )
 from ._model import ComplianceModel
+from ._shape import ShapeData
 from ._signals import signals_from_recording
 from ._stream import NormalEquations, StreamingQR, scaled_cholesky
 from ._stream_fast import fast_path_supported, fused_columns
@@ -332,6 +334,7 @@ def calibrate_chunks(
     throw: bool = True,
     refine_above: float = REFINE_ABOVE_COND,
     t0: float | None = None,
+    monotone: bool = True,
 ) -> Solution:
     """[`calibrate_stream`][] from design chunks (Song et al. eqs. (15)-(17)).
 
@@ -339,18 +342,21 @@ def calibrate_chunks(
     `x` the compact columns (`q x rows`, as `_compact_column_list` orders them), `b` the twist,
     `torque` the reference torque and `seg` each row's torque segment. The refinement pass
     runs above the scaled condition number `refine_above` (0: always, as
-    [`hdjax.compliance.calibrate_lstsq`][] does).
+    [`hdjax.compliance.calibrate_lstsq`][] does); `monotone` as there (the shape constraint's
+    data accumulated in the first pass).
     """
     t0 = time.perf_counter() if t0 is None else t0
     n_seg, p = model.n_segments, model.n_coef
     ne = NormalEquations(p)
     counts = np.zeros(n_seg, dtype=np.int64)
     t_lo, t_hi = np.full(n_seg, np.inf), np.full(n_seg, -np.inf)
-    # -- pass 1: Gram matrix, segment counts and torque ranges ------------------------------
+    shape = ShapeData(model)
+    # -- pass 1: Gram matrix, segment counts, torque ranges, the shape constraint's data ----
     for x, b, tq, seg in passes():
         for idx, rows in _blocks(model, x, seg):
             ne.add(x[:, rows], b[rows], idx)
         ne.add_rhs(b)
+        shape.add(x, b, tq)
         cnt = np.bincount(seg, minlength=n_seg)
         counts += cnt
         for s_ in np.flatnonzero(cnt):
@@ -363,6 +369,20 @@ def calibrate_chunks(
     n_act = int(active.sum())
     check_sample_count(n, n_act)
     collinear: tuple = ()
+
+    def residual_pass(x):
+        # A^T (b - A x) and |b - A x|^2 over one pass (a refinement with the true residual)
+        atr, rss_x = np.zeros(p), 0.0
+        for xc, b, _, seg in passes():
+            r = np.array(b, copy=True)
+            blocks = _blocks(model, xc, seg)
+            for idx, rows in blocks:
+                r[rows] -= x[idx] @ xc[:, rows]
+            for idx, rows in blocks:
+                atr[idx] += xc[:, rows] @ r[rows]
+            rss_x += float(r @ r)
+        return atr, rss_x
+
     csne = scaled_cholesky(g, atb, active, CSNE_MAX_COND)
     # -- pass 2: refinement with the true residual, or the QR factor ------------------------
     if csne is not None and csne[1] <= refine_above:
@@ -372,15 +392,7 @@ def calibrate_chunks(
         rank = n_act
     elif csne is not None:
         coef, cond, solve = csne
-        atr, rss0 = np.zeros(p), 0.0
-        for x, b, _, seg in passes():
-            r = np.array(b, copy=True)
-            blocks = _blocks(model, x, seg)
-            for idx, rows in blocks:
-                r[rows] -= coef[idx] @ x[:, rows]
-            for idx, rows in blocks:
-                atr[idx] += x[:, rows] @ r[rows]
-            rss0 += float(r @ r)
+        atr, rss0 = residual_pass(coef)
         dx = solve(atr)
         coef = coef + dx
         rss = rss0 - 2.0 * dx @ atr + dx @ g @ dx
@@ -402,6 +414,19 @@ def calibrate_chunks(
         qtb_full[active] = qtb_c
         scale = np.where(active, norms, 1.0)
         coef, rank, cond, collinear = solve_from_r(model, r_full, qtb_full, scale, active, throw)
+    coef_ls = coef
+    (coef, rank, cond, collinear), shape_rec = constrain_shape(
+        model,
+        (coef, rank, cond, collinear),
+        g,
+        active,
+        shape,
+        monotone,
+        lambda x: residual_pass(x)[0],
+    )
+    if coef is not coef_ls:  # the residual sum of squares at the constrained solution
+        dx = coef - coef_ls
+        rss = rss + dx @ g @ dx
     calibrated = active[:n_seg]
     if calibrated.any() and np.isfinite(t_lo[calibrated]).any():
         torque_range = (float(t_lo[calibrated].min()), float(t_hi[calibrated].max()))
@@ -418,4 +443,5 @@ def calibrate_chunks(
         segment_counts=counts_t,
         dropped=dropped,
         t0=t0,
+        shape=shape_rec,
     )

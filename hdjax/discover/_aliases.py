@@ -49,18 +49,23 @@ def span_cosine(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.clip(s.min(), 0.0, 1.0))
 
 
-def find_aliases(term, others, sig, torque, *, threshold: float = ALIAS_COSINE) -> list[dict]:
+def find_aliases(
+    term, others, sig, torque, *, threshold: float = ALIAS_COSINE, take=None
+) -> list[dict]:
     """The candidates among `others` (`(key, term)` pairs) whose columns on TRAIN span what
     `term`'s span, to `threshold`: `[{"key", "cosine"}]`, the closest first.
 
-    `sig` and `torque` are the training signals the candidates were scored on.
+    `sig` and `torque` are the training signals the candidates were scored on; `take`
+    (optional) takes TRAIN's rows from columns computed on a whole log it is part of.
     """
-    n = int(np.asarray(sig.twist).shape[0])
+    take = take or (lambda x: x)
+    own = take(np.asarray(candidate_columns(term, sig, torque)))
+    n = own.shape[0]
     rows = slice(None, None, max(1, -(-n // MAX_ROWS)))
-    own = np.asarray(candidate_columns(term, sig, torque))[rows]
+    own = own[rows]
     out = []
     for key, other in others:
-        cols = np.asarray(candidate_columns(other, sig, torque))[rows]
+        cols = take(np.asarray(candidate_columns(other, sig, torque)))[rows]
         if cols.shape[1] != own.shape[1]:
             continue
         cos = span_cosine(own, cols)

@@ -31,6 +31,7 @@ from ..compliance import ComplianceModel
 from ..compliance._lstsq import _compact_column_list, _design
 from ..compliance._stream_fit import MIN_CHUNK
 from ..effects._dahl_carry import DahlCarry as DahlCarry, is_sequential as sequential
+from ..effects._skew import BACK_SAMPLES
 
 
 def check_chunk(chunk, where: str = "discover chunk") -> int:
@@ -64,6 +65,17 @@ def _pad(x, rows: int, size: int):
 def slice_signals(sig: Signals, lo: int, hi: int, size: int) -> Signals:
     """Rows `lo:hi` of every signal, padded to `size` rows."""
     return jax.tree_util.tree_map(lambda x: _pad(x[lo:hi], hi - lo, size), sig)
+
+
+LOOKBACK = BACK_SAMPLES + 1
+"""Rows before its own that a chunk's signals carry (a halo): the most samples back that a
+column reads (an encoder skew's interpolation, a rate one sample late), so a chunk's columns
+equal the whole record's rows."""
+
+
+def own_rows(x, h: int):
+    """A chunk's signals (or torque) without their `h` halo rows."""
+    return None if x is None else jax.tree_util.tree_map(lambda a: a[h:], x)
 
 
 def dahl_chunked(
@@ -124,31 +136,37 @@ class Chunks:
         self.size = min(self.chunk, self.n)
         self.bounds = chunk_bounds(self.n, self.chunk)
 
-    def signals(self) -> Iterator[tuple[int, int, Signals, jax.Array]]:
-        """`(lo, hi, signals, torque)` of each chunk, padded to the chunk length."""
+    def signals(self) -> Iterator[tuple[int, int, Signals, jax.Array, int]]:
+        """`(lo, hi, signals, torque, h)` of each chunk: its rows with `h` rows of halo before
+        them (`LOOKBACK`, fewer at the record's start), padded to one length."""
         torque = jnp.asarray(self.torque)
+        size = self.size + LOOKBACK
         for lo, hi in self.bounds:
+            h = min(LOOKBACK, lo)
             yield (
                 lo,
                 hi,
-                slice_signals(self.sig, lo, hi, self.size),
-                _pad(torque[lo:hi], hi - lo, self.size),
+                slice_signals(self.sig, lo - h, hi, size),
+                _pad(torque[lo - h : hi], hi - lo + h, size),
+                h,
             )
 
     def rows(self, model: ComplianceModel) -> Iterator[tuple]:
-        """`(lo, hi, signals, torque, A)`: each chunk's signals (padded) and the full design's
-        rows `lo:hi` (eq. (15)), `(hi - lo, p)`."""
+        """`(lo, hi, signals, torque, A, h)`: each chunk's signals (padded, with `h` halo rows
+        first) and the full design's rows `lo:hi` (eq. (15)), `(hi - lo, p)`."""
         seq = _sequential_positions(model, model.n_coef - model.n_effect)
         carry = DahlCarry()
-        for lo, hi, sc, tc in self.signals():
-            a = np.array(self.design(model, sc, tc)[: hi - lo])
+        for lo, hi, sc, tc, h in self.signals():
+            a = np.array(self.design(model, sc, tc)[h : h + hi - lo])
             for col, term in seq:
-                a[:, col] = carry.column(col, term, sc, tc, hi - lo, numpy=False)
-            yield lo, hi, sc, tc, a
+                a[:, col] = carry.column(
+                    col, term, own_rows(sc, h), own_rows(tc, h), hi - lo, numpy=False
+                )
+            yield lo, hi, sc, tc, a, h
 
     def designs(self, model: ComplianceModel) -> Iterator[tuple[int, int, np.ndarray]]:
         """`(lo, hi, A)`: the full design's rows `lo:hi` (eq. (15)), `(hi - lo, p)`."""
-        for lo, hi, _, _, a in self.rows(model):
+        for lo, hi, _, _, a, _ in self.rows(model):
             yield lo, hi, a
 
     def compact_passes(self, model: ComplianceModel):
@@ -160,12 +178,15 @@ class Chunks:
 
         def passes():
             carry = DahlCarry()
-            for lo, hi, sc, tc in self.signals():
+            for lo, hi, sc, tc, h in self.signals():
                 cols, seg = _compact_column_list(model, sc, tc)
                 rows = hi - lo
-                x = np.stack([np.asarray(c)[:rows] for c in cols])
+                x = np.stack([np.asarray(c)[h : h + rows] for c in cols])
                 for col, term in seq:
-                    x[col] = carry.column(col, term, sc, tc, rows, numpy=False)
-                yield x, np.asarray(sc.twist)[:rows], self.torque[lo:hi], np.asarray(seg)[:rows]
+                    x[col] = carry.column(
+                        col, term, own_rows(sc, h), own_rows(tc, h), rows, numpy=False
+                    )
+                twist = np.asarray(sc.twist)[h : h + rows]
+                yield x, twist, self.torque[lo:hi], np.asarray(seg)[h : h + rows]
 
         return passes

@@ -18,6 +18,7 @@ import scipy.linalg
 from .._custom_types import Float
 from ..compliance import ComplianceModel, StreamingQR
 from ..compliance._lstsq import CSNE_MAX_COND
+from ..compliance._shape import ShapeConstraint, ShapeData, solve_on
 from ..compliance._stream import scaled_cho_factor
 from ._chunked import Chunks
 
@@ -55,8 +56,12 @@ class ChunkedFoldSolver:
         self.aty = np.zeros((n_folds, q))
         self.nz = np.zeros((n_folds, q), np.int64)
         g_tot, aty_tot, nz_tot = np.zeros((q, q)), np.zeros(q), np.zeros(q, np.int64)
-        for lo, hi, a in self._designs():
+        shape = ShapeData(model, layout="full")
+        torque = np.asarray(chunks.torque)
+        for lo, hi, a_full in chunks.designs(model):
+            a = np.compress(np.isin(np.arange(self.p), self.active), a_full, axis=1)
             y, fid = self.y[lo:hi], self.fold_id[lo:hi]
+            shape.add(a_full, y, torque[lo:hi])
             g_tot += a.T @ a
             aty_tot += y @ a
             nz_tot += np.count_nonzero(a, axis=0)
@@ -68,6 +73,9 @@ class ChunkedFoldSolver:
                     self.aty[f] += y[m] @ am
                     self.nz[f] += np.count_nonzero(am, axis=0)
         self.g_tot, self.aty_tot, self.nz_tot = g_tot, aty_tot, nz_tot
+        self.shape = ShapeConstraint.of(model, shape, np.asarray(model.active))
+        """The shape constraint of the structure on the whole record (every fold's fit is
+        held to it, as the full calibration is)."""
         self._solved = None
 
     def _designs(self):
@@ -157,6 +165,11 @@ class ChunkedFoldSolver:
                 c += dx
             full = np.zeros(self.p)
             full[self.active] = c
+            if self.shape is not None and self.shape.violation(full) > 0.0:
+                kept = self.active[keep]
+                g = (self.g_tot - self.g[f])[np.ix_(keep, keep)]
+                full = solve_on(self.shape, full, g, kept)
+                dx = full[self.active] - coef0[:, f]
             coefs[f] = full
             sse[f] = float(sw[f] + 2.0 * dx @ aw[:, f] + dx @ gs[f] @ dx)
         return coefs, sse

@@ -107,16 +107,30 @@ def resampled_assignments(n_blocks: int, n_folds: int, n_resamples: int, seed: i
     return [rng.permutation(np.arange(n_blocks) % n_folds) for _ in range(n_resamples)]
 
 
-def cv_block_length(residual, starts, n_folds: int, minimum: int) -> tuple[int, str | None]:
+def run_length(rows: np.ndarray) -> int:
+    """The median length of the contiguous runs of `rows` (sorted row indices of a record):
+    how long the stretches a part cut in blocks from one log are."""
+    rows = np.asarray(rows)
+    if rows.size == 0:
+        return 0
+    cuts = np.flatnonzero(np.diff(rows) != 1) + 1
+    lengths = np.diff(np.r_[0, cuts, rows.size])
+    return int(np.median(lengths))
+
+
+def cv_block_length(
+    residual, starts, n_folds: int, minimum: int, per_fold: int = 2
+) -> tuple[int, str | None]:
     """Block length for the folds: the correlation length, at least `minimum` samples and
-    `n / MAX_BLOCKS`, at most what leaves two blocks per fold; a note when the cap binds.
+    `n / MAX_BLOCKS`, at most what leaves `per_fold` blocks per fold; a note when the cap
+    binds.
 
     The note is a warning when the capped blocks are shorter than the correlation length (the
     record is too short for the residual's memory: held-out blocks are partly predicted from
     their correlated neighbours, and the cross-validated errors are optimistic)."""
     n = np.asarray(residual).size
     corr = correlation_length(residual, starts)
-    cap = max(1, n // (2 * n_folds))
+    cap = max(1, n // (per_fold * n_folds))
     # long records: at most MAX_BLOCKS blocks (the stability scores keep a Gram matrix each)
     # 4/3: contiguous_blocks keeps every block at least 3/4 of the length it is given
     length = max(minimum, -(-4 * corr // 3), -(-n // MAX_BLOCKS))
@@ -125,13 +139,14 @@ def cv_block_length(residual, starts, n_folds: int, minimum: int) -> tuple[int, 
         if corr > cap:
             note = (
                 f"warning: the residual stays correlated over {corr} samples, longer than the "
-                f"{cap}-sample blocks that leave two per cross-validation fold; folds use {cap}-"
+                f"{cap}-sample blocks that leave {per_fold} per cross-validation fold; folds use "
+                f"{cap}-"
                 "sample blocks, shorter than the correlation time, so the cross-validated errors "
                 "are optimistic (a longer TRAIN recording avoids this)"
             )
         else:
             note = (
-                f"cross-validation blocks of {cap} samples (two per fold), fewer than the "
+                f"cross-validation blocks of {cap} samples ({per_fold} per fold), fewer than the "
                 f"{length} asked for, but no shorter than the residual's correlation length "
                 f"({corr} samples)"
             )

@@ -291,6 +291,7 @@ def build_library(
     *,
     options: LibraryOptions | None = None,
     extra_columns: tuple[str, ...] = (),
+    unidentified: list[str] | None = None,
 ) -> tuple[list[Candidate], dict[str, OrderSpectrum]]:
     """All candidate effects for the present residual, and the order spectra used.
 
@@ -300,7 +301,9 @@ def build_library(
     `residual` (twist residual of `model`), `model` (the present
     [`hdjax.compliance.ComplianceModel`][]: its joint gives the ratio, rated torque and twist
     sign, and its effects are not offered again), `options` ([`LibraryOptions`][], default all
-    families), `extra_columns` (names of usable extra columns).
+    families), `extra_columns` (names of usable extra columns), `unidentified` (optional: a
+    list the families' one-line reasons for offering nothing are appended to, see
+    [`hdjax.effects.CandidateContext.cannot_identify`][]).
     """
     options = LibraryOptions() if options is None else options
     spectra: dict[str, OrderSpectrum] = {}
@@ -345,4 +348,6 @@ def build_library(
     cands: list[Candidate] = []
     for family in effects.families():
         cands += family.candidates(ctx)
+    if unidentified is not None:
+        unidentified.extend(ctx.unidentified)
     return cands, spectra

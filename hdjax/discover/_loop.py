@@ -37,16 +37,17 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .._custom_types import Float
-from .._errors import CalibrationError, DataError, HdjaxError, InversionError
+from .._errors import CalibrationError, ConfigError, DataError, HdjaxError, InversionError
 from .._joint import Joint
 from .._metrics import ErrorMetrics, error_metrics
 from .._recording import Recording
 from .._solution import RESULTS, Solution
 from ..compliance import ComplianceModel, merge_sparse_segments
 from ..compliance._lstsq import CalibrationData, failure_message, prepare
-from ..effects import AbstractTerm
+from ..effects import AbstractTerm, current_viscous_slope, velocity_reading
+from ..reference import reference_checks
 from ._aliases import find_aliases
-from ._chunked import Chunks, DahlCarry, check_chunk, sequential
+from ._chunked import Chunks, DahlCarry, check_chunk, own_rows, sequential
 from ._chunked_fits import twist_residual
 from ._folds import (
     contiguous_blocks,
@@ -54,6 +55,7 @@ from ._folds import (
     cv_block_length,
     fold_assignment,
     resampled_assignments,
+    run_length,
 )
 from ._gram import block_statistics_batched, block_statistics_streamed, fold_gains
 from ._library import LibraryOptions, build_library, candidate_columns
@@ -62,12 +64,13 @@ from ._pipeline import (
     calibrate,
     canonical,
     chunks_of,
+    context_parts,
     cross_validate,
     design,
     estimate,
+    fit_merging,
     has_path,
     pipeline_signals,
-    quiet_calibrate,
     within_one_se,
 )
 from ._select import (
@@ -160,48 +163,29 @@ class DiscoveryRecord:
     baseline_cv_twist_rms_arcsec: float = float("nan")
     unexplained: list = dataclasses.field(default_factory=list)
     cv_block_samples: int = 0
+    reference_checks: dict = dataclasses.field(default_factory=dict)
+    """Per part (`"TRAIN"`, `"TEST"`), the findings of
+    [`hdjax.reference.reference_checks`][] on the final model's estimate."""
+    cv_test_ratio: float = float("nan")
+    """The final cross-validated torque RMS over the TEST RMS: far from 1 (above 2 or below
+    1/2), cross-validation does not represent TEST."""
 
     @property
     def effects(self) -> list[str]:
         return [s.key for s in self.steps]
 
 
-_quiet_calibrate = quiet_calibrate
-
-
-def _merge_knot(model: ComplianceModel, j: int) -> ComplianceModel:
-    """Remove the knot between segment `j` and its neighbour towards 0 N·m."""
-    lo, hi = model.segment_bounds[j]
-    knot = lo if lo > 0.0 else hi
-    return model.restructured(knots=[k for k in model.knots if k != knot])
-
-
-def _calibrate_monotone(model, train, notes, chunk=0):
-    """Calibrate; while an outer segment's compliance comes out non-positive, merge it inwards."""
-    while True:
-        res = _quiet_calibrate(model, train, notes, throw=False, chunk=chunk)
-        k = np.asarray(res.value.k)
-        act = np.asarray(res.value.active[: model.n_segments])
-        bad = [
-            j
-            for j, (lo, hi) in enumerate(model.segment_bounds)
-            if act[j] and not k[j] > 0 and not lo <= 0.0 < hi
-        ]
-        if not bad:
-            if not res.ok:
-                raise CalibrationError(failure_message(res))
-            return res
-        j = max(bad, key=lambda j: abs(sum(model.segment_bounds[j][:1])))
-        lo, hi = model.segment_bounds[j]
-        notes.append(
-            f"torque segment [{lo:.4g}, {hi:.4g}) N·m calibrated to a non-positive compliance "
-            f"({k[j]:.3g} rad/(N·m)): merged into its neighbour"
-        )
-        model = _merge_knot(model, j)
+def _calibrate_monotone(model, data: PipelineData, notes, chunk=0):
+    """Calibrate the starting model (shape-constrained, merging segments the data does not
+    determine: [`hdjax.discover._pipeline.fit_merging`][]); a failure raises."""
+    res = fit_merging(model, data.pair(), notes, chunk=chunk, rows=data.rows, throw=False)
+    if not res.ok:
+        raise CalibrationError(failure_message(res))
+    return res
 
 
 def calibrate_baseline(
-    train: Recording, joint: Joint, options: DiscoverOptions, notes: list[str]
+    train: Recording | PipelineData, joint: Joint, options: DiscoverOptions, notes: list[str]
 ) -> ComplianceModel:
     """The starting model (paper structure) calibrated on `train`, with documented fallbacks.
 
@@ -209,8 +193,11 @@ def calibrate_baseline(
     into their inner neighbour. If the model is rank-deficient on the data (e.g. a current that
     is the reference torque itself), fall back in order to shared coefficients, then without
     the current polynomial, then without the kinematic-error term, and say so in `notes`.
+    `train` is a recording, or its pipeline signals (a part of a log with `rows`).
     """
-    scale = options.current_scale or float(np.max(np.abs(np.asarray(train.current)))) or 1.0
+    data = _as_data(None, train, joint)
+    current = data.part(data.sig.current)
+    scale = options.current_scale or float(np.max(np.abs(current))) or 1.0
     attempts = []
     for kw in (
         dict(
@@ -233,12 +220,10 @@ def calibrate_baseline(
             kinematic="paper" if kw["fourier_order"] else "none",
             **kw,
         )
-        model, merged = merge_sparse_segments(model, np.asarray(train.torque))
+        model, merged = merge_sparse_segments(model, data.part(data.torque))
         trial_notes = list(merged)
         try:
-            res = _calibrate_monotone(
-                model, _as_data(model, train).pair(), trial_notes, options.chunk
-            )
+            res = _calibrate_monotone(model, data, trial_notes, options.chunk)
         except (CalibrationError, InversionError) as err:
             last = err
             notes.append(f"starting model {kw} not calibrated: {err}")
@@ -250,24 +235,30 @@ def calibrate_baseline(
     raise CalibrationError(f"no starting model could be calibrated on the training data: {last}")
 
 
-def _as_data(model, data) -> PipelineData:
+def _as_data(model, data, joint: Joint | None = None) -> PipelineData:
+    """`data` as pipeline signals (a recording's derived with `model`'s or `joint`'s ratio and
+    sign)."""
     if isinstance(data, PipelineData):
         return data
+    if model is None:
+        return pipeline_signals(data, joint.ratio, joint.twist_sign, "difference")
     return pipeline_signals(data, model.ratio, model.twist_sign, model.velocity)
 
 
 def _test_errors(model, test, rated):
-    """TEST torque errors of `model` (the pipeline's signals: gaps honoured)."""
+    """TEST torque errors of `model` (the pipeline's signals: gaps honoured; with a context,
+    estimated through the whole log and scored on TEST's rows). **Returns:** the metrics and
+    the estimate on TEST's rows."""
     data = _as_data(model, test)
-    torque = estimate(model, data)
-    return error_metrics(torque, data.torque, rated), torque
+    torque = data.part(estimate(model, data))
+    return error_metrics(torque, data.part(data.torque), rated), torque
 
 
 def _twist_rms(model, data, driver=None, chunk=0) -> float:
     data = _as_data(model, data)
     if driver is None and has_path(model):
         driver = estimate(model, data)
-    r = _residual(model, data, driver, chunk)
+    r = data.part(_residual(model, data, driver, chunk))
     return float(np.sqrt(np.mean(r**2)) * ARCSEC)
 
 
@@ -320,14 +311,17 @@ def _usable(c: np.ndarray) -> bool:
     return varies
 
 
-def _streamed_scores(cands, sig, torque, a, y, resid, blocks, options, phase):
+def _streamed_scores(cands, sig, torque, a, y, resid, blocks, options, phase, take=None):
     """Block statistics of the candidates' columns, computed `BATCH_COLUMNS` columns at a
     time, and the sparse regression on every `step`-th sample of them (the rows
     [`sindy_select`][hdjax.discover._select.sindy_select] reads).
 
+    `take` (optional) takes a part's rows from columns computed on the whole record.
+
     **Returns:** `(sindy-selected per column, owner candidate per column, usable candidate
     indices, BlockStatistics of the usable candidates)`.
     """
+    take = take or (lambda x: x)
     n = a.shape[0]
     step = max(1, n // MAX_SINDY_ROWS)
     thin: list[np.ndarray] = []
@@ -337,7 +331,7 @@ def _streamed_scores(cands, sig, torque, a, y, resid, blocks, options, phase):
     def batches():
         batch, width = [], 0
         for i, cand in enumerate(cands):
-            c = candidate_columns(cand.term, sig, torque)
+            c = take(candidate_columns(cand.term, sig, torque))
             for j in range(c.shape[1]):
                 thin.append(np.ascontiguousarray(c[::step, j]))
                 owner.append(i)
@@ -381,16 +375,23 @@ def _chunked_scores(cands, model, chunks: Chunks, resid, blocks, options, phase)
 
     def passes():
         carry = DahlCarry()
-        for lo, hi, sc, tc, a_full in chunks.rows(model):
+        for lo, hi, sc, tc, a_full, h in chunks.rows(model):
             a = a_full if active.all() else np.compress(active, a_full, axis=1)
             rows = hi - lo
             groups = []
             for i, cand in enumerate(cands):
                 if sequential(cand.term):
-                    c = carry.column(i, cand.term, sc, tc, rows, cand.term.score_in_numpy)
+                    c = carry.column(
+                        i,
+                        cand.term,
+                        own_rows(sc, h),
+                        own_rows(tc, h),
+                        rows,
+                        cand.term.score_in_numpy,
+                    )
                     c = c[:, None]
                 else:
-                    c = candidate_columns(cand.term, sc, tc)[:rows]
+                    c = candidate_columns(cand.term, sc, tc)[h : h + rows]
                 groups.append(np.asarray(c, np.float64))
             if first[0]:
                 # copies, not views: a view of every `step`-th row keeps the whole chunk's
@@ -441,8 +442,10 @@ def score_candidates(
     resamples=(),
     est=None,
     phases=None,
+    unidentified=None,
 ):
-    """Library, spectra and per-candidate scores for one step.
+    """Library, spectra and per-candidate scores for one step (the families' reasons for
+    offering nothing appended to `unidentified`, when given).
 
     With `blocks` (the folds' whole contiguous blocks), every cross-validated score comes from
     one pass of per-block Gram statistics ([`hdjax.discover._gram`][]); without, from per-fold
@@ -454,14 +457,15 @@ def score_candidates(
     phase = phases or null_phases()
     data = _as_data(model, train)
     chunk = options.chunk
+    take = data.part  # columns are computed on the whole record, scored on the part's rows
     with phase("design"):
         sig, torque = training_data(model, data, est)
-        y = np.asarray(sig.twist)
+        y = take(sig.twist)
         if chunk:
             a = None
             resid = twist_residual(canonical(model), chunks_of(sig, torque, chunk))
         else:
-            a_full = design(model, sig, torque)
+            a_full = take(design(model, sig, torque))
             active = np.asarray(model.active)
             # np.compress copies the active columns several times faster than a[:, active]
             a = a_full if active.all() else np.compress(active, a_full, axis=1)
@@ -469,7 +473,13 @@ def score_candidates(
             del a_full
     with phase("library"):
         cands, spectra = build_library(
-            sig, torque, resid, model, options=options.library, extra_columns=extra_columns
+            data.part_signals(sig),
+            take(torque),
+            resid,
+            model,
+            options=options.library,
+            extra_columns=extra_columns,
+            unidentified=unidentified,
         )
         if not cands:
             return [], spectra, resid
@@ -480,7 +490,7 @@ def score_candidates(
             )
         else:
             selected, owner, usable, stats = _streamed_scores(
-                cands, sig, torque, a, y, resid, blocks, options, phase
+                cands, sig, torque, a, y, resid, blocks, options, phase, take
             )
         with phase("twist CV"):
             total, per_fold = fold_gains(stats, _fold_of_block(blocks, folds), options.n_folds)
@@ -488,7 +498,7 @@ def score_candidates(
             resampled = [fold_gains(stats, fb, options.n_folds)[0] for fb in resamples]
     else:
         with phase("library"):
-            cols = [candidate_columns(c.term, sig, torque) for c in cands]
+            cols = [take(candidate_columns(c.term, sig, torque)) for c in cands]
         with phase("sindy"):
             flat_cols, owner = [], []
             for i, c in enumerate(cols):
@@ -561,6 +571,57 @@ def _parsimonious(trials, cv, blocks, options, notes):
     return best
 
 
+VELOCITY_KEYS = ("skew:encoders", "viscous:omega_l", "viscous:omega_m")
+"""Keys whose columns are, to first order, the same speed: an encoder time skew and viscous
+friction (the twist cannot tell them apart; the current may)."""
+
+
+def _twist_per_speed(model: ComplianceModel, key: str) -> float:
+    """The twist [rad] per rad/s of link speed that the fitted term `key` adds."""
+    coef = np.asarray(model.coef)
+    i = model.n_coef - model.n_effect
+    for term in model.effect_terms:
+        m = len(term.names())
+        if term.key == key:
+            c = float(coef[i])
+            if key == "skew:encoders":
+                return c  # the coefficient is the delay: twist = delay * speed
+            per = c / term.scale
+            return per * model.ratio if term.signal == "omega_m" else per
+        i += m
+    return float("nan")
+
+
+def _velocity_reading(best, trials, data: PipelineData, notes: list[str]):
+    """When the chosen trial is a speed term ([`VELOCITY_KEYS`][]), which reading the data
+    supports ([`hdjax.effects.velocity_reading`][]): its twist per speed, over the data's
+    compliance, against the current's own viscous slope. The chosen trial is swapped for the
+    other reading's, when that was tried too, and the sentence is noted either way."""
+    key = best[1].key
+    if key not in VELOCITY_KEYS:
+        return best
+    model = best[5]
+    view = data.view()
+    # the model's own compliance where the speed is (weighted by the speed's square)
+    w = np.asarray(view.sig.omega_l) ** 2
+    seg = np.searchsorted(np.asarray(model.knots), view.torque, side="right")
+    k_local = np.asarray(model.k)[seg]
+    k = float(np.sum(w * k_local) / np.sum(w)) if np.sum(w) > 0 else float("nan")
+    per_speed = _twist_per_speed(model, key) / k if k else float("nan")
+    slope = current_viscous_slope(
+        np.asarray(view.sig.current), view.torque, np.asarray(view.sig.omega_l)
+    )
+    sentence = velocity_reading(per_speed, slope)
+    want = "skew:encoders" if sentence.startswith("skew") else "viscous:omega_l"
+    if slope is not None and key != want:
+        other = [t for t in trials if t[1].key == want]
+        if other:
+            notes.append(f"{want} chosen over {key}, which fits the same speed column: {sentence}")
+            return other[0]
+    notes.append(f"{key}: {sentence}")
+    return best
+
+
 def _eligible(ranked, options: DiscoverOptions):
     """The shortlist of `_best_per_key`'s ranking: selected by the sparse regression,
     removing at least `min_gain` of the cross-validated twist error on the standard folds, and
@@ -577,11 +638,16 @@ def discover(
     options: DiscoverOptions = DiscoverOptions(),
     *,
     progress: Callable[[str], None] | None = None,
+    context: Recording | None = None,
 ) -> Solution:
     """Run the residual loop (see the module docstring).
 
     **Arguments:** `train` (calibration and selection), `test` (reporting only; needs a
-    reference torque), `joint`, `options`, `progress` (called with one line per stage).
+    reference torque), `joint`, `options`, `progress` (called with one line per stage),
+    `context` (optional: the whole log `train` and `test` were cut from, as blocks of one
+    sweep: derivatives and memory states then run through it, as the estimator runs on the
+    robot, while TRAIN's rows alone are fitted and TEST's alone scored; the reference torque of
+    the other part is never read).
 
     **Returns:** an [`hdjax.Solution`][]: `value` the final
     [`hdjax.compliance.ComplianceModel`][]; `stats` `n_effects`, `baseline_test_rms` and
@@ -594,17 +660,43 @@ def discover(
     than BLAS threads contending with XLA's and with each other (the results are the same).
     """
     with threadpool_limits(limits=1, user_api="blas"):
-        return _discover(train, test, joint, options, progress)
+        return _discover(train, test, joint, options, progress, context)
 
 
-def _discover(train, test, joint, options, progress) -> Solution:
+def _parts(train, test, joint, options, context, notes):
+    """TRAIN's and TEST's pipeline signals: each its own recording, or (with `context`) parts
+    of the one log they were cut from."""
+    if context is None:
+        return train, test
+    if options.chunk:
+        raise ConfigError(
+            "a context log (TRAIN and TEST cut from one log) runs in memory; set chunk = 0, or "
+            "give TRAIN and TEST as separate logs to run chunk by chunk"
+        )
+    tr, te = context_parts(context, [train, test], joint.ratio, joint.twist_sign, "difference")
+    notes.append(
+        f"TRAIN and TEST are blocks of one log ({context.n_samples} samples): derivatives and "
+        "memory states run through the whole log, as the estimator runs on the robot; TRAIN's "
+        "rows alone are fitted and TEST's alone scored"
+    )
+    return tr, te
+
+
+def _discover(train, test, joint, options, progress, context=None) -> Solution:
     say = progress or (lambda _: None)
     t_start = time.perf_counter()
+    if options.chunk and getattr(options.library, "dahl_initial", False):
+        # a state carried chunk by chunk starts at 0: over a long log its start hardly counts
+        options = dataclasses.replace(
+            options, library=dataclasses.replace(options.library, dahl_initial=False)
+        )
     for rec, name in ((train, "TRAIN"), (test, "TEST")):
         if rec.torque is None:
             raise DataError(f"{name} ({rec.source}) has no 'torque' column; the loop needs it")
     notes: list[str] = []
     phase = Phases()
+    extra_columns = _usable_columns(train)
+    train, test = _parts(train, test, joint, options, context, notes)
     with phase("baseline"):
         model = baseline_model = calibrate_baseline(train, joint, options, notes)
         # with a chunk, estimates run chunk by chunk too (see PipelineData.chunk)
@@ -623,18 +715,35 @@ def _discover(train, test, joint, options, progress) -> Solution:
     # folds: whole contiguous blocks, no shorter than the residual's correlation length
     with phase("baseline"):
         est_train = estimate(model, data)
-        resid0 = _residual(model, data, None, options.chunk)
-    block, note = cv_block_length(resid0, data.starts, options.n_folds, options.block)
+        resid0 = data.part(_residual(model, data, None, options.chunk))
+    minimum, per_fold = options.block, 2
+    if test_data.rows is not None:
+        # TEST is blocks of the same log: hold out blocks like TEST's, one per fold at least,
+        # so the folds ask TRAIN for what TEST will (as far from the training rows)
+        minimum, per_fold = max(1, run_length(test_data.rows)), 1
+    block, note = cv_block_length(resid0, data.part_starts, options.n_folds, minimum, per_fold)
     if note:
         notes.append(note)
-    blocks = contiguous_blocks(data.starts, block)
+    # blocks and folds over TRAIN's rows ("local"); the record's rows for the torque CV
+    blocks = contiguous_blocks(data.part_starts, block)
+    n_folds = min(options.n_folds, int(blocks.max()) + 1)
+    if n_folds != options.n_folds:
+        notes.append(
+            f"TRAIN holds {n_folds} blocks as long as TEST's: cross-validation uses {n_folds} folds"
+        )
+        options = dataclasses.replace(options, n_folds=n_folds)
     folds = fold_assignment(blocks, options.n_folds)
+    folds_rec = folds if data.rows is None else [data.rows[f] for f in folds]
+    blocks_rec = blocks
+    if data.rows is not None:
+        blocks_rec = np.full(data.n, -1)
+        blocks_rec[data.rows] = blocks
     # each resample deals the blocks to the folds in a random balanced order
     resamples = resampled_assignments(
         int(blocks.max()) + 1, options.n_folds, options.n_resamples, options.seed
     )
     with phase("torque CV"):
-        cv = cross_validate(model, data, folds, chunk=options.chunk)
+        cv = cross_validate(model, data, folds_rec, chunk=options.chunk)
     base_cv = cv
     say(f"baseline: cross-validated torque RMS {cv.torque_rms:.4g} N·m on TRAIN")
     if not np.isfinite(cv.torque_rms):
@@ -642,8 +751,8 @@ def _discover(train, test, joint, options, progress) -> Solution:
             "cross-validation scores no held-out sample: every fold holds out torques outside "
             "the range its training part calibrates, so no effect can be judged and none is added"
         )
-    extra_columns = _usable_columns(train)
     steps: list[DiscoveryStep] = []
+    unidentified: list[str] = []
     excluded: set[str] = set()
     ranking: list[dict] = []
     spectra: dict = {}
@@ -659,6 +768,7 @@ def _discover(train, test, joint, options, progress) -> Solution:
             resamples=resamples,
             est=est_train,
             phases=phase,
+            unidentified=unidentified,
         )
         ranked = _best_per_key([s for s in scored if s[0].key not in excluded], options.min_gain)
         ranking = [
@@ -689,7 +799,7 @@ def _discover(train, test, joint, options, progress) -> Solution:
                             model.with_effects(cand.term), data, notes, est_train, options.chunk
                         )
                     with phase("torque CV"):
-                        new_cv = cross_validate(new_model, data, folds, cv, options.chunk)
+                        new_cv = cross_validate(new_model, data, folds_rec, cv, options.chunk)
                 except (CalibrationError, InversionError) as err:
                     notes.append(f"candidate {cand.key} could not be added: {err}")
                     continue
@@ -722,12 +832,15 @@ def _discover(train, test, joint, options, progress) -> Solution:
                 f"({cv.torque_rms:.4g} N·m) by {options.min_torque_gain:.0%} (tried: {tried})"
             )
             break
-        best = _parsimonious(trials, cv, blocks, options, notes)
+        best = _parsimonious(trials, cv, blocks_rec, options, notes)
+        best = _velocity_reading(best, trials, data, notes)
         _, cand, gain, folds_, stab, new_model, new_est, new_cv = best
         with phase("aliases"):
             # on the signals the candidates were scored on (the model before this step)
             others = [(r[0].key, r[0].term) for r in ranked[:10] if r[0].key != cand.key]
-            aliases = find_aliases(cand.term, others, *training_data(model, data, est_train))
+            aliases = find_aliases(
+                cand.term, others, *training_data(model, data, est_train), take=data.part
+            )
         with phase("test"):
             metrics, est = _test_errors(new_model, test_data, joint.rated_torque)
             twist_rms = _twist_rms(new_model, test_data, chunk=options.chunk)
@@ -785,21 +898,28 @@ def _discover(train, test, joint, options, progress) -> Solution:
                     model, None, data, est_train, length=length, chunks=chunks, instruments=inst
                 )
             else:
-                a_final = design(model, sig_d, torque)
-                res_final = data.twist - a_final @ np.asarray(model.coef)
-                length = bootstrap_length(res_final, data.starts)
-                z = design(model, sig_d, instrument_torque(torque, data.starts))
+                # designs on the whole record (memory states), statistics on TRAIN's rows
+                view = data.view()
+                a_final = data.part(design(model, sig_d, torque))
+                res_final = view.twist - a_final @ np.asarray(model.coef)
+                length = bootstrap_length(res_final, view.starts)
+                inst = np.full(data.n, np.nan)
+                inst[data.rows if data.rows is not None else slice(None)] = instrument_torque(
+                    view.torque, view.starts
+                )
+                z = data.part(design(model, sig_d, inst))
                 intervals = effect_intervals(
-                    model, a_final, data, est_train, length=length, instruments=z
+                    model, a_final, view, data.part(est_train), length=length, instruments=z
                 )
                 del a_final, z
             for s_, iv in zip(steps, intervals):
                 s_.amplitude = iv
     with phase("unexplained"):
-        corr = correlation_length(resid, data.starts) if resid is not None else 1
-        angles = {s: np.asarray(data.sig.get(s)) for s in ("theta_m", "theta_l")}
+        view = data.view()
+        corr = correlation_length(resid, view.starts) if resid is not None else 1
+        angles = {s: np.asarray(view.sig.get(s)) for s in ("theta_m", "theta_l")}
         left = unexplained_structure(
-            resid if resid is not None else data.twist * 0.0,
+            resid if resid is not None else view.twist * 0.0,
             spectra
             if resid is None
             else all_spectra(
@@ -809,16 +929,34 @@ def _discover(train, test, joint, options, progress) -> Solution:
                 spectra,
             ),
             {
-                "torque": data.torque,
-                "omega_m": np.asarray(data.sig.omega_m),
-                "omega_l": np.asarray(data.sig.omega_l),
+                "torque": view.torque,
+                "omega_m": np.asarray(view.sig.omega_m),
+                "omega_l": np.asarray(view.sig.omega_l),
             },
             correlation_length=corr,
-            starts=data.starts,
+            starts=view.starts,
             angles=angles,
         )
-    say(phase.line())
+    notes += list(dict.fromkeys(unidentified))
     final = steps[-1].test if steps else base_metrics
+    with phase("reference"):
+        checks = _reference_findings(
+            model, data, est_train, test_data, steps[-1].torque_estimate if steps else base_est
+        )
+        for part, found in checks.items():
+            for f in found:
+                if f["flagged"]:
+                    say(f"reference ({part}): {f['message']}")
+    say(phase.line())
+    ratio = cv.torque_rms / final.rms if final.rms > 0 else float("nan")
+    if np.isfinite(ratio) and not 0.5 <= ratio <= 2.0:
+        notes.append(
+            f"cross-validation does not represent TEST: the final cross-validated torque RMS "
+            f"({cv.torque_rms:.4g} N·m) is {ratio:.2g} times the TEST RMS ({final.rms:.4g} N·m), "
+            "so the held-out blocks of TRAIN ask for "
+            + ("more extrapolation than TEST does" if ratio > 1 else "less than TEST does")
+            + "; the loop's choices rest on TRAIN's folds, and the TEST figure is what to trust"
+        )
     if final.rms > base_metrics.rms:
         # TEST never chooses, so it can disagree with cross-validation: say so, loudly
         notes.append(
@@ -843,6 +981,8 @@ def _discover(train, test, joint, options, progress) -> Solution:
         test=test,
         unexplained=left,
         cv_block_samples=int(block),
+        reference_checks=checks,
+        cv_test_ratio=float(ratio),
     )
     stats = dict(
         n_effects=len(steps),
@@ -854,6 +994,25 @@ def _discover(train, test, joint, options, progress) -> Solution:
         fit_time_s=time.perf_counter() - t_start,
     )
     return Solution(model, RESULTS.successful, stats, aux=record)
+
+
+def _reference_findings(model, data, est_train, test_data, est_test) -> dict:
+    """[`hdjax.reference.reference_checks`][] of TRAIN (the final model's estimate on its rows)
+    and TEST (its estimate there, and the calibrated range)."""
+    out = {}
+    lo, hi = model.torque_range
+    for part, d, est in (("TRAIN", data, data.part(est_train)), ("TEST", test_data, est_test)):
+        v = d.view()
+        est = np.asarray(est, np.float64)
+        out[part] = reference_checks(
+            np.asarray(v.sig.t),
+            v.torque,
+            est,
+            current=np.asarray(v.sig.current),
+            omega=np.asarray(v.sig.omega_l),
+            in_range=(est >= lo) & (est <= hi),
+        )
+    return out
 
 
 def refit_structure(

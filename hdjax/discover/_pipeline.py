@@ -24,13 +24,14 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 
-from .._custom_types import Array, ArrayLike, Bool, Float
-from .._errors import InversionError
+from .._custom_types import Array, ArrayLike, Bool, Float, Int, Shaped
+from .._errors import DataError, InversionError
 from .._recording import Recording
 from ..compliance import ComplianceModel, Signals, calibrate_lstsq, signals_from_recording
 from ..compliance._inversion import _invert, _split_effects
 from ..compliance._lstsq import CSNE_MAX_COND, _design, _term_columns, term_signals
 from ..compliance._model import base_term_columns
+from ..compliance._shape import ShapeConstraint, ShapeData, solve_on
 from ..compliance._stream import scaled_cho_factor
 from ..compliance._stream_fit import calibrate_chunks
 from ..effects import SEGMENT_START, TORQUE_PATH
@@ -45,7 +46,8 @@ model's own estimate (the change after the third round is far below the noise)."
 
 @dataclasses.dataclass(frozen=True)
 class PipelineData:
-    """Signals (gap-safe), reference torque and segment starts of one recording."""
+    """Signals (gap-safe), reference torque and segment starts of one recording, or of one
+    part of it (`rows`)."""
 
     sig: Signals
     torque: Float[np.ndarray, " n"]
@@ -53,10 +55,48 @@ class PipelineData:
     chunk: int = 0
     """With a chunk (the loop's `chunk` setting), `estimate` inverts a model without a
     path term chunk by chunk, so its program's working memory is bounded by the chunk."""
+    rows: Int[np.ndarray, " m"] | None = None
+    """The rows this part owns, when it was cut from one log with other rows between (TRAIN
+    and TEST blocks of one sweep): signals, derivatives and memory states run through the
+    whole record, as the estimator runs on the robot, while fits use and scores read these
+    rows only (the reference torque of the others is NaN here, so none leaks). `None`: all."""
 
     @property
     def n(self) -> int:
         return int(self.torque.size)
+
+    def part(self, x: Shaped[ArrayLike, "n ..."]) -> Shaped[np.ndarray, "m ..."]:
+        """`x` (one value per row of the record) on this part's rows."""
+        x = np.asarray(x)
+        return x if self.rows is None else x[self.rows]
+
+    @property
+    def part_starts(self) -> Bool[np.ndarray, " m"]:
+        """Segment starts on the part's rows: a gap of the record, or a join where rows of
+        another part lie between."""
+        if self.rows is None:
+            return self.starts
+        starts = self.starts[self.rows].copy()
+        starts[1:] |= np.diff(self.rows) != 1
+        starts[:1] = True
+        return starts
+
+    def view(self, sig: Signals | None = None) -> PipelineData:
+        """The part on its own rows (signals, torque and starts taken; `rows` `None`), for
+        pointwise statistics of columns already computed on the whole record."""
+        if self.rows is None and sig is None:
+            return self
+        return PipelineData(
+            self.part_signals(sig), self.part(self.torque), self.part_starts, self.chunk
+        )
+
+    def part_signals(self, sig: Signals | None = None) -> Signals:
+        """The signals (default the record's) on the part's rows, for pointwise statistics;
+        columns with memory are computed on the whole record first, then taken."""
+        sig = self.sig if sig is None else sig
+        if self.rows is None:
+            return sig
+        return jax.tree.map(lambda x: jnp.asarray(np.asarray(x)[self.rows]), sig)
 
     @property
     def twist(self) -> Float[np.ndarray, " n"]:
@@ -100,6 +140,45 @@ def pipeline_signals(
     sig = eqx.tree_at(lambda s: s.extras, sig, extras)
     torque = None if rec.torque is None else np.asarray(rec.torque, np.float64)
     return PipelineData(sig, torque, starts)
+
+
+def context_parts(
+    context: Recording, parts: list[Recording], ratio: float, twist_sign: float, velocity: str
+) -> list[PipelineData]:
+    """TRAIN and TEST (`parts`) cut from one log `context`, each as a [`PipelineData`][] over
+    the whole log with its own `rows`, found by their timestamps; each part's view holds the
+    reference torque of its own rows only (NaN elsewhere). `DataError` when a part's
+    timestamps are not rows of the log, or two parts share a row."""
+    whole = pipeline_signals(context, ratio, twist_sign, velocity)
+    t = np.asarray(context.t, np.float64)
+    if np.any(np.diff(t) <= 0):
+        raise DataError(
+            f"{context.source}: the log's timestamps must increase strictly to place TRAIN and "
+            "TEST in it"
+        )
+    taken = np.zeros(t.size, bool)
+    out = []
+    for part in parts:
+        tp = np.asarray(part.t, np.float64)
+        idx = np.searchsorted(t, tp)
+        ok = (idx < t.size) & (t[np.minimum(idx, t.size - 1)] == tp)
+        if not ok.all():
+            raise DataError(
+                f"{part.source}: {int((~ok).sum())} of its {tp.size} timestamps are not rows of "
+                f"the log {context.source} it was said to be cut from; pass the whole log it "
+                "was cut from, or no context"
+            )
+        if taken[idx].any():
+            raise DataError(
+                f"{part.source}: {int(taken[idx].sum())} rows are also in another part: TRAIN "
+                "and TEST must not share samples"
+            )
+        taken[idx] = True
+        torque = np.full(t.size, np.nan)
+        if part.torque is not None:
+            torque[idx] = np.asarray(part.torque, np.float64)
+        out.append(dataclasses.replace(whole, torque=torque, rows=idx.astype(np.int64)))
+    return out
 
 
 HYSTERESIS_MARGIN = 0.25
@@ -302,9 +381,10 @@ def _invert_in_chunks(core: ComplianceModel, sig: Signals, r, g, chunk: int) -> 
     return out
 
 
-def quiet_calibrate(model, pair, notes, throw=True, chunk: int = 0):
-    """`calibrate_lstsq` with its warnings turned into notes; with `chunk`, the same fit with
-    the normal equations and the refinement accumulated over chunks of that many samples
+def quiet_calibrate(model, pair, notes, throw=True, chunk: int = 0, rows=None):
+    """`calibrate_lstsq` with its warnings turned into notes (on the rows `rows` of the pair,
+    default all); with `chunk`, the same fit with the normal equations and the refinement
+    accumulated over chunks of that many samples
     ([`hdjax.compliance._stream_fit.calibrate_chunks`][], always refined, as in memory)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -312,30 +392,109 @@ def quiet_calibrate(model, pair, notes, throw=True, chunk: int = 0):
             passes = chunks_of(pair[0], pair[1], chunk).compact_passes(model)
             res = calibrate_chunks(model, passes, label="TRAIN", throw=throw, refine_above=0.0)
         else:
-            res = calibrate_lstsq(model, pair, throw=throw)
+            res = calibrate_lstsq(model, pair, throw=throw, rows=rows)
     for w in caught:
         notes.append(str(w.message))
     return res
+
+
+REFINE_ROUNDS = 6
+"""Most refits that bring a term whose hyperparameter follows its own fitted coefficient (an
+encoder skew built for the delay it finds) to its fixed point."""
+
+
+def refined_structure(model: ComplianceModel) -> ComplianceModel | None:
+    """`model`'s structure with every term that has a `refined(coef)` method (its column built
+    for the coefficient the fit found, [`hdjax.effects.EncoderSkew.refined`][]) replaced by
+    its refined term, or `None` when none changes."""
+    coef = np.asarray(model.coef)
+    i, terms, changed = model.n_coef - model.n_effect, [], False
+    for term in model.effect_terms:
+        m = len(term.names())
+        new = term.refined(coef[i : i + m]) if hasattr(term, "refined") else None
+        terms.append(term if new is None else new)
+        changed |= new is not None
+        i += m
+    return model.restructured(effect_terms=terms) if changed else None
 
 
 def calibrate(
     structure: ComplianceModel, data: PipelineData, notes, previous_estimate, chunk: int = 0
 ):
     """Calibrate `structure` on all of `data`; with path terms, driver rounds from
-    `previous_estimate`; with `chunk`, the fits accumulated chunk by chunk.
+    `previous_estimate`; with `chunk`, the fits accumulated chunk by chunk; terms whose column
+    follows their own coefficient are refitted to their fixed point ([`refined_structure`][]).
     **Returns:** (model, its torque estimate on `data`)."""
+    for _ in range(REFINE_ROUNDS):
+        model, est = _calibrate_once(structure, data, notes, previous_estimate, chunk)
+        structure = refined_structure(model)
+        if structure is None:
+            break
+    return model, est
+
+
+def held_outer_segments(res) -> list[int]:
+    """The outer torque segments (not the one holding 0 N·m) whose compliance the shape
+    constraint of calibration `res` holds at its floor and least squares alone makes
+    non-positive: the data there does not determine it."""
+    model, shape = res.value, res.stats.get("shape_constraint")
+    plain = res.stats.get("unconstrained_k")
+    if shape is None or not res.stats.get("constrained") or plain is None:
+        return []
+    tight = shape.active_segments(np.asarray(model.coef), model.n_segments)
+    return [
+        j
+        for j, (lo, hi) in enumerate(model.segment_bounds)
+        if tight[j] and not plain[j] > 0 and not lo <= 0.0 < hi
+    ]
+
+
+def merge_knot(model: ComplianceModel, j: int) -> ComplianceModel:
+    """`model`'s structure without the knot between segment `j` and its neighbour towards
+    0 N·m (coefficients reset)."""
+    lo, hi = model.segment_bounds[j]
+    knot = lo if lo > 0.0 else hi
+    return model.restructured(knots=[k for k in model.knots if k != knot])
+
+
+def fit_merging(structure, pair, notes, chunk=0, rows=None, throw=True):
+    """[`quiet_calibrate`][], merging inwards every outer segment the shape constraint holds
+    at its floor ([`held_outer_segments`][]; the outermost first, one at a time) and refitting:
+    the neighbour's compliance continues there, rather than a compliance the data does not
+    determine. Each merge is noted. **Returns:** the final calibration's Solution."""
+    while True:
+        trial: list[str] = []
+        res = quiet_calibrate(structure, pair, trial, throw=False, chunk=chunk, rows=rows)
+        held = held_outer_segments(res) if res.ok else []
+        if not held:
+            notes.extend(trial)
+            if throw and not res.ok:
+                quiet_calibrate(structure, pair, [], throw=True, chunk=chunk, rows=rows)
+            return res
+        j = max(held, key=lambda j: abs(sum(structure.segment_bounds[j][:1])))
+        lo, hi = structure.segment_bounds[j]
+        notes.append(
+            f"torque segment [{lo:.4g}, {hi:.4g}) N·m calibrates to a non-positive compliance "
+            f"by least squares ({res.stats['unconstrained_k'][j]:.3g} rad/(N·m)): merged into "
+            "its neighbour"
+        )
+        structure = merge_knot(structure, j)
+
+
+def _calibrate_once(structure, data, notes, previous_estimate, chunk):
     structure = canonical(structure)
     if not has_path(structure):
-        model = quiet_calibrate(structure, data.pair(), notes, chunk=chunk).value
+        model = fit_merging(structure, data.pair(), notes, chunk=chunk, rows=data.rows).value
         return model, estimate(model, data)
     driver = previous_estimate
     for _ in range(DRIVER_ROUNDS):
-        model = quiet_calibrate(structure, data.pair(driver), notes, chunk=chunk).value
+        model = fit_merging(structure, data.pair(driver), notes, chunk=chunk, rows=data.rows).value
+        structure = canonical(model)
         why = hysteresis_invertible(model)
         if why:
             raise InversionError(why)
         est = estimate(model, data)
-        if not np.all(np.isfinite(est)):
+        if not np.all(np.isfinite(data.part(est))):
             raise InversionError(
                 f"the model with {structure.effect_keys[-1]} gives a non-finite torque estimate"
             )
@@ -387,9 +546,10 @@ class FoldSolver:
     on the copied rows. A column that is zero over the training rows gets no coefficient.
     """
 
-    def __init__(self, a: np.ndarray, y: np.ndarray, active: np.ndarray):
+    def __init__(self, a: np.ndarray, y: np.ndarray, active: np.ndarray, shape=None):
         self.a, self.y = a, y
         self.active = np.flatnonzero(active)
+        self.shape = shape
         act = self.active
         self.g = (a.T @ a)[np.ix_(act, act)]
         self.aty = (y @ a)[act]
@@ -416,14 +576,28 @@ class FoldSolver:
             train_rows = np.ones(a.shape[0], bool)
             train_rows[te] = False
             coef[act] = _fold_solve(a[train_rows][:, act], y[train_rows])
-            return coef
+            return self._constrained(coef, g, idx)
         fast = chol[0]
         coef[idx] = scipy.linalg.cho_solve(fast, aty / d, check_finite=False) / d
         # one refinement step with the true residual over the training rows
         r = y - a @ coef
         atr = (r @ a)[idx] - r[te] @ at
         coef[idx] += scipy.linalg.cho_solve(fast, atr / d, check_finite=False) / d
-        return coef
+        return self._constrained(coef, g, idx)
+
+    def _constrained(self, coef: np.ndarray, g: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """`coef` projected onto the shape constraint of the full calibration (the fold's
+        Gram matrix `g` over the columns `idx` as the metric), as that calibration is."""
+        return solve_on(self.shape, coef, g, idx)
+
+
+def structure_shape(model: ComplianceModel, a: np.ndarray, y, torque):
+    """The shape constraint of `model`'s structure on the rows of its full-layout design `a`
+    (twist `y`, reference `torque`), as the calibration on them sets it; `None` when the
+    twist does not rise with the torque there."""
+    data = ShapeData(model, layout="full")
+    data.add(a, y, torque)
+    return ShapeConstraint.of(model, data, np.asarray(model.active))
 
 
 MIN_FOLD_SEGMENT_SAMPLES = 30
@@ -450,6 +624,55 @@ def _fold_model(model: ComplianceModel, coef: np.ndarray, train_torque) -> Compl
     return ComplianceModel(**d)
 
 
+REST_FRACTION = 0.02
+"""A sample is at rest when its link speed is at most this fraction of the record's 99th
+percentile speed (a regime of its own for the cross-validation's coverage check)."""
+
+FAST_FRACTION = 0.5
+"""Above this fraction of the 99th percentile speed a motion is fast, below it slow (speeding
+up or slowing down: where speed-dependent effects, a skew or friction, change)."""
+
+N_REGIMES = 5
+
+
+def motion_regime(omega: ArrayLike) -> Int[np.ndarray, " n"]:
+    """Per sample: 0 at rest, 1 / 2 moving forwards slowly / fast, 3 / 4 backwards slowly /
+    fast (see `REST_FRACTION` and `FAST_FRACTION`)."""
+    w = np.asarray(omega, np.float64)
+    if w.size == 0:
+        return np.zeros(0, int)
+    top = np.quantile(np.abs(w), 0.99)
+    rest = np.abs(w) <= REST_FRACTION * top
+    fast = np.abs(w) > FAST_FRACTION * top
+    return np.where(rest, 0, np.where(w > 0, 1, 3) + fast)
+
+
+def scored_rows(data: PipelineData, folds: list[np.ndarray]) -> list[np.ndarray]:
+    """Per fold, the held-out rows it scores: those whose regime the fold's training part
+    covers, as a TEST recording is covered by TRAIN. A row is covered when the training rows
+    in its motion regime ([`motion_regime`][]: at rest, moving slowly or fast forwards or
+    backwards) reach
+    torques on both sides of its own: the fit then interpolates there rather than
+    extrapolating (a block held out at the end of a one-way sweep asks it to extrapolate, and
+    TEST never does). The mask depends on the data only, so every structure is scored on the
+    same rows."""
+    fit = np.zeros(data.n, bool)
+    fit[np.arange(data.n) if data.rows is None else data.rows] = True
+    regime = motion_regime(np.asarray(data.sig.omega_l))
+    out = []
+    for te in folds:
+        train = fit.copy()
+        train[te] = False
+        keep = np.zeros(te.size, bool)
+        for r in range(N_REGIMES):
+            tr = data.torque[train & (regime == r)]
+            if tr.size:
+                here = regime[te] == r
+                keep |= here & (data.torque[te] >= tr.min()) & (data.torque[te] <= tr.max())
+        out.append(te[keep])
+    return out
+
+
 def cross_validate(
     model: ComplianceModel,
     data: PipelineData,
@@ -460,8 +683,10 @@ def cross_validate(
     """Cross-validated torque and twist error of `model`'s structure (see the module docstring).
 
     `model` is the structure calibrated on all of TRAIN: its active coefficients and torque
-    range are kept, so every fold model compiles to the same program. With `chunk`, the fold
-    fits are accumulated over chunks of that many samples ([`ChunkedFoldSolver`][]).
+    range are kept, so every fold model compiles to the same program. `folds` are the held-out
+    rows of each fold (rows of the record; with `data.rows`, among them). Each fold scores the
+    held-out rows its training part covers ([`scored_rows`][]). With `chunk`, the fold fits
+    are accumulated over chunks of that many samples ([`ChunkedFoldSolver`][]).
     """
     path = has_path(model)
     active = np.asarray(model.active)
@@ -472,43 +697,41 @@ def cross_validate(
     sq = np.full(n, np.nan)
     model = canonical(model)
     torque = jnp.asarray(data.torque)
-    # the held-out samples scored: those whose reference torque lies inside the range the
-    # fold's training part calibrates (as TEST flags estimates outside the calibrated range);
-    # the mask depends on the data only, so every structure is scored on the same samples
+    # the fits read the part's rows only: their own row numbers there ("local")
+    fit = np.arange(n) if data.rows is None else data.rows
+    local = np.full(n, -1)
+    local[fit] = np.arange(fit.size)
     fold_id = np.zeros(n, int)
-    scored = []
     for f, te in enumerate(folds):
         fold_id[te] = f
-        train_rows = np.ones(n, bool)
-        train_rows[te] = False
-        lo, hi = data.torque[train_rows].min(), data.torque[train_rows].max()
-        scored.append(te[(data.torque[te] >= lo) & (data.torque[te] <= hi)])
+    scored = scored_rows(data, folds)
     if chunk:
         masks = [np.isin(np.arange(n), s_) for s_ in scored]
         chunked = lambda sig, folds_: ChunkedFoldSolver(
             model, chunks_of(sig, data.torque, chunk), fold_id, masks, folds_
         )
         fixed_solver = None if path else chunked(data.sig, None)
+        shape = fixed_solver.shape if fixed_solver is not None else None
     else:
-        fixed = None if path else design(model, data.sig, torque)
-        fixed_solver = None if path else FoldSolver(fixed, y, active)
+        fixed = None if path else design(model, data.sig, torque)[fit]
+        shape = None if path else structure_shape(model, fixed, y[fit], data.torque[fit])
+        fixed_solver = None if path else FoldSolver(fixed, y[fit], active, shape)
     for f, te in enumerate(folds):
-        train_rows = np.ones(n, bool)
+        train_rows = np.zeros(n, bool)
+        train_rows[fit] = True
         train_rows[te] = False
-        driver = (
-            previous.fold_estimate(f, data)
-            if (path and previous is not None)
-            else data.torque * 0.0
-        )
+        driver = previous.fold_estimate(f, data) if (path and previous is not None) else np.zeros(n)
         for _ in range(rounds):
             if fixed_solver is not None:
                 solver = fixed_solver
             elif chunk:
                 solver = chunked(data.with_driver(driver), (f,))
             else:
-                a = np.asarray(_design(model, data.with_driver(driver), torque))
-                solver = FoldSolver(a, y, active)
-            coef = solver.solve(te if not chunk else f)
+                a = np.asarray(_design(model, data.with_driver(driver), torque))[fit]
+                if shape is None:
+                    shape = structure_shape(model, a, y[fit], data.torque[fit])
+                solver = FoldSolver(a, y[fit], active, shape)
+            coef = solver.solve(local[te] if not chunk else f)
             fold_model = _fold_model(model, coef, data.torque[train_rows])
             est = estimate(fold_model, data)
             driver = np.where(np.isfinite(est), est, 0.0)
@@ -517,13 +740,13 @@ def cross_validate(
         if chunk:
             sse_w += solver.twist_sse(f)
         else:
-            w = solver.a[te] @ coef - y[te]
+            w = solver.a[local[te]] @ coef - y[te]
             sse_w += float(np.sum(w**2))
         sse = float(np.sum(e**2)) if np.all(np.isfinite(e)) else np.inf
         sq[te] = np.where(np.isfinite(e), e**2, np.inf)
         sse_t += sse
         cnt += te.size
-        per_fold.append(float(np.sqrt(sse / max(te.size, 1))))
+        per_fold.append(float(np.sqrt(sse / te.size)) if te.size else float("nan"))
         fold_models.append(fold_model)
     # no held-out sample inside the folds' calibrated ranges: the error is unknown (NaN), so no
     # step can be accepted on it (a zero here would accept anything)

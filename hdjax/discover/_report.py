@@ -73,6 +73,8 @@ def report_dict(solution: Solution, *, extra: dict | None = None) -> dict:
         "last_ranking": result.final_ranking,
         "unexplained": result.unexplained,
         "cv_block_samples": result.cv_block_samples,
+        "cv_test_ratio": result.cv_test_ratio,
+        "reference_checks": result.reference_checks,
         "notes": result.notes,
         "final_model": solution.value.to_dict(),
         "seconds": solution.stats["fit_time_s"],
@@ -245,12 +247,38 @@ def report_markdown(d: dict, figures: list[tuple[str, str]]) -> str:
                 f"({u['explained']:.1%} of the residual variance)"
             )
         lines.append("")
+    lines += _checks_lines(d)
     for note in d["notes"]:
         lines.append(f"- {note}")
     lines.append("")
     for caption, name in figures:
         lines += [f"![{caption}](figures/{name})", ""]
     return "\n".join(lines)
+
+
+def _checks_lines(d: dict) -> list[str]:
+    """The cross-validated against the TEST error, and the reference checks that found
+    something (markdown lines)."""
+    final_cv = d["steps"][-1]["cv_torque_rms"] if d["steps"] else d["baseline"]["cv_torque_rms"]
+    ratio = d.get("cv_test_ratio", float("nan"))
+    out = [
+        f"Cross-validated torque RMS on TRAIN {final_cv:.4g} N·m, TEST RMS {d['final']['rms']:.4g} "
+        f"N·m (ratio {ratio:.2g}"
+        + (
+            "; cross-validation does not represent TEST)."
+            if np.isfinite(ratio) and not 0.5 <= ratio <= 2.0
+            else ")."
+        ),
+        "",
+    ]
+    found = [
+        (part, f) for part, fs in d.get("reference_checks", {}).items() for f in fs if f["flagged"]
+    ]
+    if found:
+        out += ["Reference checks (what the estimate is scored against):", ""]
+        out += [f"- {part}, {f['check']}: {f['message']}" for part, f in found]
+        out.append("")
+    return out
 
 
 def write_report(

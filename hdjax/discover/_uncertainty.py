@@ -51,7 +51,7 @@ from ..compliance._lstsq import CSNE_MAX_COND
 from ..compliance._stream import scaled_cho_factor
 from ._chunked import Chunks
 from ._folds import MAX_BLOCKS, correlation_length
-from ._pipeline import PipelineData, canonical
+from ._pipeline import PipelineData, canonical, structure_shape
 
 ARCSEC = 180.0 * 3600.0 / np.pi
 N_BOOTSTRAP = 400
@@ -196,6 +196,14 @@ def effect_intervals(
     active = np.asarray(model.active)
     y = data.twist
     n = y.size
+    if chunks is None:
+        # compliances the shape constraint holds at its floor are known, not estimated: they
+        # leave the regression (their twist taken from the target) and the intervals are
+        # conditional on the active set
+        held = _held_at_floor(model, design, y, data.torque)
+        if held.any():
+            y = y - design[:, held] @ np.asarray(model.coef)[held]
+            active = active & ~held
     cols = np.flatnonzero(active)
     if chunks is not None:
         model = canonical(model)
@@ -261,28 +269,47 @@ def effect_intervals(
             w = np.ones(n)
         k_eff = float(np.sum(w * comp) / np.sum(w))
         ci = []
+        boot_coef = None
         for blocks in schemes:
             boot = np.linalg.solve(
                 blocks.sums(xx).reshape(-1, m, m) + 1e-300 * np.eye(m), blocks.sums(xy)[..., None]
             )
+            boot_coef = boot[..., 0] if boot_coef is None else boot_coef
             amps = _amplitude(term, boot[..., 0], peak)
             k_boot = blocks.sums(w * comp) / np.maximum(blocks.sums(w), np.finfo(float).tiny)
             ci.append((amps, amps / k_boot))
         q = [(1 - LEVEL) / 2, (1 + LEVEL) / 2]
         lo, hi = np.quantile(ci[0][0], q)
         nm_lo, nm_hi = np.quantile(ci[1][1], q)
-        out.append(
-            dict(
-                effect=term.key,
-                arcsec=amp * ARCSEC,
-                arcsec_ci95=[float(lo) * ARCSEC, float(hi) * ARCSEC],
-                nm=amp / k_eff,
-                nm_ci95=[float(nm_lo), float(nm_hi)],
-                block_samples=length,
-                nm_block_samples=length_nm,
-            )
+        row = dict(
+            effect=term.key,
+            arcsec=amp * ARCSEC,
+            arcsec_ci95=[float(lo) * ARCSEC, float(hi) * ARCSEC],
+            nm=amp / k_eff,
+            nm_ci95=[float(nm_lo), float(nm_hi)],
+            block_samples=length,
+            nm_block_samples=length_nm,
         )
+        label = getattr(term, "coefficient_label", None)
+        if label is not None and m == 1:
+            # the coefficient is the physical parameter itself (a delay): its own interval
+            name, unit = label
+            row[name] = float(beta[0]) * unit
+            row[name + "_ci95"] = [float(v) * unit for v in np.quantile(boot_coef[:, 0], q)]
+        out.append(row)
     return out
+
+
+def _held_at_floor(model: ComplianceModel, design: np.ndarray, y, torque) -> np.ndarray:
+    """Which coefficients of `model` the shape constraint holds at its floor on this data (the
+    compliances of the segments with an active constraint)."""
+
+    held = np.zeros(model.n_coef, bool)
+    shape = structure_shape(model, design, y, torque)
+    if shape is None:
+        return held
+    held[: model.n_segments] = shape.active_segments(np.asarray(model.coef), model.n_segments)
+    return held & np.asarray(model.active)
 
 
 class _Blocks:

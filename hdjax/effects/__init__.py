@@ -54,8 +54,11 @@ from ._hysteresis import (
     HysteresisFamily as HysteresisFamily,
     LuGre as LuGre,
     TwistHysteresis as TwistHysteresis,
+    dahl_initial as dahl_initial,
     dahl_state as dahl_state,
     dahl_state_numpy as dahl_state_numpy,
+    one_way_from_rest as one_way_from_rest,
+    starts_at_rest as starts_at_rest,
     twist_compliance as twist_compliance,
 )
 from ._kinematic import (
@@ -87,6 +90,12 @@ from ._ripple import (
     RippleFamily as RippleFamily,
     ripple_key as ripple_key,
     torque_ratio as torque_ratio,
+)
+from ._skew import (
+    EncoderSkew as EncoderSkew,
+    SkewFamily as SkewFamily,
+    current_viscous_slope as current_viscous_slope,
+    velocity_reading as velocity_reading,
 )
 from ._stiffening import (
     CubicSpring as CubicSpring,
@@ -121,6 +130,7 @@ from ._wave_generator import (
 register(KinematicFamily())
 register(CoulombFamily())
 register(ViscousFamily())
+register(SkewFamily())
 register(StribeckFamily())
 register(HysteresisFamily())
 register(BacklashFamily())

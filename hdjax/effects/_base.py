@@ -485,6 +485,10 @@ class CandidateContext:
     families: frozenset
     options: OptionsLike
     spectrum_orders: Callable | None = None
+    unidentified: list = dataclasses.field(default_factory=list)
+    """One line per family the data cannot identify (a log too short or too one-sided),
+    naming the family and what data would identify it; a family that offers nothing for such a
+    reason says so here rather than falling silent."""
 
     def option(self, family: AbstractFamily, name: str) -> OptionValue:
         """A library option of `family`, or the family's default when the options lack it."""
@@ -493,6 +497,11 @@ class CandidateContext:
     def wants(self, family_name: str) -> bool:
         """Whether the discover family `family_name` is switched on and not yet in the model."""
         return family_name in self.families and family_name not in self.existing_keys
+
+    def cannot_identify(self, family_name: str, why: str, needs: str) -> None:
+        """Record that the data cannot identify `family_name`: `why`, and the data that `needs`
+        (both short clauses)."""
+        self.unidentified.append(f"{family_name} cannot be identified: {why}; {needs}")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -82,4 +82,9 @@ class DahlCarry:
             )
             z = np.asarray(zs)[:rows]
         self.state[key] = (float(z[-1]), float(driver[rows - 1]))
+        if getattr(term, "lag", False):
+            # one sample late (the column excludes the sample it explains): the state the
+            # previous chunk ended with at this chunk's first sample, 0 where a restart is
+            first = 0.0 if r[0] else z0
+            z = np.where(r, 0.0, np.r_[first, z[:-1]])
         return z

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, Float, SamplesLike
@@ -26,7 +27,13 @@ from ._fields import hyper, labels, rounded
 class TwistRate(AbstractTorqueFreeTerm):
     """Structural damping signature: the twist rate $\\dot{\\Delta\\theta} = s(\\omega_l -
     \\omega_m/N)$ (eq. (5) differentiated), divided by `scale`. A damped flexspline carries
-    $c\\dot{\\Delta\\theta}$ on top of its elastic torque, which the twist alone cannot show."""
+    $c\\dot{\\Delta\\theta}$ on top of its elastic torque, which the twist alone cannot show.
+
+    **The encoders' noise.** The column at sample $k$ is the rate at sample $k-1$ (the backward
+    difference of samples $k-1$ and $k-2$): the rate at $k$ differences the present sample,
+    whose encoder noise is then both in the column and in the twist it explains, and a
+    regression on it fits that noise (a "damping" on a joint that has none). One sample of
+    delay is far below a damped mode's period at the sampling rates it can be seen at."""
 
     ratio: float = hyper(1.0, positive=True)
     sign: float = hyper(1.0)
@@ -43,8 +50,10 @@ class TwistRate(AbstractTorqueFreeTerm):
         return self._column(np.asarray(sig.omega_m), np.asarray(sig.omega_l))[:, None]
 
     def _column(self, omega_m, omega_l):
-        # the same arithmetic for JAX and NumPy arrays
-        return self.sign * (omega_l - omega_m / self.ratio) / self.scale
+        # the same arithmetic for JAX and NumPy arrays; one sample late (class docstring)
+        rate = self.sign * (omega_l - omega_m / self.ratio) / self.scale
+        xp = np if isinstance(rate, np.ndarray) else jnp
+        return xp.concatenate([rate[:1], rate[:-1]])
 
 
 class DampingFamily(AbstractFamily):

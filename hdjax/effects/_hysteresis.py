@@ -47,7 +47,7 @@ from ._base import (
     CandidateContext,
     PlantEffect,
 )
-from ._fields import bound, concrete, hyper, labels
+from ._fields import bound, concrete, fmt, hyper, labels
 
 
 def dahl_state(
@@ -137,23 +137,110 @@ def _affine_recurrence(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return bb.T.reshape(-1)[:n]
 
 
+def dahl_initial(
+    driver: SamplesLike, torque_scale: float, reset: Shaped[ArrayLike, " n"] | None = None
+) -> Float[ArrayLike, " n"]:
+    r"""The column that carries a Dahl state's initial value: $s\,P_k$ with
+    $P_k = \prod_{j \le k} a_j$, $a_j = \max(0, 1 - |\Delta u_j| / T_h)$, from 1 at the record's
+    start (and at each `reset`), and $s$ the direction of the driver's first substantial motion
+    there (the sign of its displacement when $P$ first falls below 1/2).
+
+    While no step saturates, the clipped recursion of [`dahl_state`][] is affine in its state
+    ($z_k = a_k z_{k-1} + b_k$, see [`dahl_state_numpy`][]), so the state started from
+    $z_0 = \zeta s$ is exactly `dahl_state` $+\ \zeta\,s P_k$: the initial state is one more
+    linear coefficient. It is taken relative to the first motion's direction because a sweep
+    from rest usually starts with the state its previous motion left, the other way
+    ($\zeta pprox -1$). $s$ looks ahead to that first motion (at most until $P < 1/2$); before
+    any motion the column is $\pm 1$ and constant, so it only shifts the twist at rest.
+    """
+    if isinstance(driver, jax.Array):
+        r = jnp.zeros(driver.shape, bool) if reset is None else jnp.asarray(reset) != 0
+        return _initial_jax(jnp.asarray(driver, jnp.float64), torque_scale, r)
+    u = np.asarray(driver, np.float64)
+    n = u.size
+    du = np.abs(np.diff(u, prepend=u[:1])) / torque_scale
+    r = np.zeros(n, bool) if reset is None else np.asarray(reset) != 0
+    if n:
+        r[0] = True
+    a = np.where(r, 1.0, np.maximum(0.0, 1.0 - du))
+    starts = np.flatnonzero(r)
+    ends = np.r_[starts[1:], n]
+    out = np.empty(n)
+    for lo, hi in zip(starts, ends):
+        p = np.cumprod(a[lo:hi])
+        below = np.flatnonzero(p < 0.5)
+        k = lo + (below[0] if below.size else hi - lo - 1)
+        out[lo:hi] = (np.sign(u[k] - u[lo]) or 1.0) * p
+    return out
+
+
+@jax.jit
+def _initial_jax(u, torque_scale, reset):
+    # dahl_initial in JAX: the running product by a scan, the direction by segment reductions
+    n = u.shape[0]
+    reset = reset.at[0].set(True)
+    du = jnp.abs(jnp.diff(u, prepend=u[:1])) / torque_scale
+
+    def _step(p, x):
+        d, rs = x
+        p = jnp.where(rs, 1.0, p * jnp.maximum(0.0, 1.0 - d))
+        return p, p
+
+    p = jax.lax.scan(_step, jnp.ones((), u.dtype), (du, reset))[1]
+    seg = jnp.cumsum(reset) - 1
+    idx = jnp.arange(n)
+    start = jax.ops.segment_min(idx, seg, num_segments=n)
+    end = jax.ops.segment_max(idx, seg, num_segments=n)
+    below = jax.ops.segment_min(jnp.where(p < 0.5, idx, n), seg, num_segments=n)
+    k = jnp.where(below < n, below, end)
+    s = jnp.sign(u[jnp.clip(k, 0, n - 1)] - u[jnp.clip(start, 0, n - 1)])
+    s = jnp.where(s == 0, 1.0, s)
+    return s[seg] * p
+
+
 def _dahl_column(
     term: Hysteresis | TwistHysteresis, sig: Signals, torque: SamplesLike | None = None
-) -> Float[Array, "n 1"]:
+) -> Float[Array, "n k"]:
     """The Dahl state ([`dahl_state`][hdjax.effects.dahl_state]; the loop of Song et al. Fig. 2)
-    of `term.dahl_driver` as one column, restarted at gaps."""
+    of `term.dahl_driver` as one column, restarted at `SEGMENT_START` from the state
+    `term.initial` $\\zeta$ times the first motion's direction ([`dahl_initial`][])."""
     driver = term.dahl_driver(sig, torque)
-    return dahl_state(driver, term.torque_scale, sig.extras.get(SEGMENT_START))[:, None]
+    reset = sig.extras.get(SEGMENT_START)
+    z = dahl_state(driver, term.torque_scale, reset)
+    zeta = float(getattr(term, "initial", 0.0))
+    if zeta:
+        z = z + zeta * dahl_initial(jnp.asarray(driver), term.torque_scale, reset)
+    lag = getattr(term, "lag", False)
+    return (late(z, reset, None) if lag else z)[:, None]
 
 
 def _dahl_column_numpy(
     term: Hysteresis | TwistHysteresis, sig: Signals, torque: SamplesLike | None = None
-) -> Float[np.ndarray, "n 1"]:
+) -> Float[np.ndarray, "n k"]:
     """NumPy reference of `_dahl_column`."""
     reset = sig.extras.get(SEGMENT_START)
     reset = None if reset is None else np.asarray(reset)
     driver = np.asarray(term.dahl_driver(sig, torque))
-    return dahl_state_numpy(driver, term.torque_scale, reset)[:, None]
+    z = dahl_state_numpy(driver, term.torque_scale, reset)
+    zeta = float(getattr(term, "initial", 0.0))
+    if zeta:
+        z = z + zeta * dahl_initial(driver, term.torque_scale, reset)
+    lag = getattr(term, "lag", False)
+    return (np.asarray(late(z, reset, None)) if lag else z)[:, None]
+
+
+def late(x, reset=None, at_reset: float | None = 0.0):
+    """`x` one sample late: `x[k-1]` at sample `k`; at the record's first sample and at each
+    `reset`, `at_reset` (the state a restart begins with), or with `None` the sample's own
+    value. JAX or NumPy arrays alike."""
+    xp = jnp if isinstance(x, jax.Array) else np
+    prev = xp.concatenate([x[:1], x[:-1]])
+    first = xp.zeros(x.shape, bool)
+    first = first.at[0].set(True) if xp is jnp else np.r_[True, np.zeros(x.shape[0] - 1, bool)]
+    if reset is not None:
+        first = first | (xp.asarray(reset) != 0)
+    fill = x if at_reset is None else xp.full(x.shape, at_reset, x.dtype)
+    return xp.where(first, fill, prev)
 
 
 class Hysteresis(AbstractPathTerm):
@@ -191,13 +278,46 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
     estimation, and the inversion only removes a known column (a torque-free term), which is
     stable whatever the loop's sharpness. The twist is divided by `compliance` (the joint's
     small-torque compliance, [`twist_compliance`][]) so that `torque_scale` reads in N·m of
-    torque path, as for [`Hysteresis`][]. Restarts at gaps (`SEGMENT_START`).
+    torque path, as for [`Hysteresis`][].
+
+    **The encoders' noise.** The state at sample $k$ is driven by the twist up to sample $k-1$
+    (one sample late): a state that read the present sample would carry that sample's encoder
+    noise, and regressing the twist on it would fit the noise (the cross-validated twist error
+    then falls below the noise floor and the effect's interval loses its coverage). One sample
+    of delay is far below any hysteresis width.
+
+    **The state at the start.** It runs through the whole record (a gap in the log does not
+    reset it: the joint keeps its state while samples are missing) and restarts only at
+    `SEGMENT_START` (the record's start, or where recordings were joined), from the state
+    `initial` $\\zeta$ times the direction of the first motion ([`dahl_initial`][]): 0 for a
+    joint that starts unloaded, $-1$ for a one-way sweep from rest that starts with the state its
+    last motion, the other way, left. The residual loop chooses $\\zeta$ from $\\{-1, 0, 1\\}$
+    by cross-validation, with the width.
     """
 
     torque_scale: float = hyper(1.0, positive=True)
     compliance: float = hyper(1.0, positive=True)
+    initial: float = hyper(0.0)
 
-    key, names = labels("hysteresis:torque", "dahl(twist/{compliance}/{torque_scale})")
+    @property
+    def key(self) -> str:
+        """The vocabulary key: hysteresis:torque."""
+        return "hysteresis:torque"
+
+    def names(self) -> tuple[str, ...]:
+        """The state's column (with its initial state when not 0)."""
+        arg = f"twist/{fmt(self.compliance)}/{fmt(self.torque_scale)}"
+        return (f"dahl({arg}; from {fmt(self.initial)})" if self.initial else f"dahl({arg})",)
+
+    def __check_init__(self):
+        if isinstance(self.initial, (int, float)) and not -1.0 <= self.initial <= 1.0:
+            raise ConfigError(
+                f"TwistHysteresis: initial (the state at the start, a fraction of the loop "
+                f"height) must lie in [-1, 1], got {self.initial!r}"
+            )
+
+    lag: ClassVar[bool] = True
+    """The column at sample $k$ is the state after sample $k-1$ (see the class docstring)."""
 
     def dahl_driver(self, sig: Signals, torque: SamplesLike | None = None) -> Samples:
         """The path the Dahl state follows: the measured twist over the compliance."""
@@ -206,6 +326,32 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
     # the Dahl state of `dahl_driver` (shared by both hysteresis terms)
     columns = _dahl_column
     numpy_columns = _dahl_column_numpy
+
+
+def one_way_from_rest(driver: SamplesLike, omega: SamplesLike) -> bool:
+    """Whether a record is a one-way sweep from rest: it starts with its Dahl driver at rest
+    ([`starts_at_rest`][]) and its link moves one way only (pauses allowed: of the samples
+    in motion, over 5 % of the 99th-percentile speed, fewer than 2 % move the other way)."""
+    w = np.asarray(omega, np.float64)
+    moving = np.abs(w) > 0.05 * np.quantile(np.abs(w), 0.99) if w.size else w
+    if not np.any(moving):
+        return False
+    minority = min(np.mean(w[moving] > 0), np.mean(w[moving] < 0))
+    return bool(minority < 0.02) and starts_at_rest(driver)
+
+
+def starts_at_rest(driver: SamplesLike) -> bool:
+    """Whether a record starts with its Dahl driver at rest: its displacement over the first
+    1 % of the samples (at least 10) is under a tenth of what the driver typically moves over
+    that many samples. Only then is the state at the start a state the joint was left in (and
+    worth choosing); a record that starts in motion starts from whatever state that motion
+    built."""
+    u = np.asarray(driver, np.float64)
+    m = max(10, u.size // 100)
+    if u.size < 4 * m:
+        return False
+    typical = np.quantile(np.abs(u[m:] - u[:-m]), 0.9)
+    return bool(abs(u[m] - u[0]) <= 0.1 * typical)
 
 
 def twist_compliance(sig: Signals, torque: SamplesLike, rated_torque: float) -> float:
@@ -365,15 +511,47 @@ class HysteresisFamily(AbstractFamily):
     terms: ClassVar[tuple] = (Hysteresis, TwistHysteresis)
     plant_effects: ClassVar[tuple] = (PlantEffect("hysteresis", "hysteresis", _defaults, _build),)
     discover_families: ClassVar[tuple] = ("hysteresis:torque",)
-    options: ClassVar[dict] = {"dahl_fractions": (0.01, 0.025, 0.05, 0.1, 0.2)}
+    options: ClassVar[dict] = {
+        "dahl_fractions": (0.01, 0.025, 0.05, 0.1, 0.2),
+        "dahl_wide_fractions": (0.5, 1.0, 2.0),
+        "dahl_initial": True,
+    }
 
     def candidates(self, ctx: CandidateContext) -> list[Candidate]:
+        """A Dahl state of the measured twist at each width of the grid `dahl_fractions` (of
+        the rated torque).
+
+        A one-way sweep from rest ([`one_way_from_rest`][]; a robot's joint moving from one
+        pose to the next) is also offered the states 0, -1 and +1 at its start (of the first
+        motion's direction, when `dahl_initial`) and the wide loops of `dahl_wide_fractions`,
+        up to twice the rated torque: its only hysteresis is the transition from the state its
+        last motion left, and that may span most of its torque range. A record with reversals
+        identifies its loops at the reversals; there the state at the start is forgotten
+        within a loop width, and a loop much wider than the torque varies within stands in for
+        any slow drift (a temperature, say), so neither is offered."""
         if not ctx.wants("hysteresis:torque"):
             return []
         # the state follows the measured deformation (stable, needs no estimate)
         k = twist_compliance(ctx.sig, ctx.torque, ctx.rated_torque)
-        fractions = ctx.option(self, "dahl_fractions")
+        fractions = tuple(ctx.option(self, "dahl_fractions"))
+        swing = float(np.ptp(np.asarray(ctx.sig.twist))) / k
+        if not swing >= min(fractions) * ctx.rated_torque:
+            ctx.cannot_identify(
+                "hysteresis:torque",
+                f"the twist swings through {swing:.3g} N·m of torque path, less than the "
+                f"narrowest loop searched ({min(fractions) * ctx.rated_torque:.3g} N·m)",
+                "record the joint loaded and unloaded over a wider torque range",
+            )
+            return []
+        starts = (0.0,)
+        if one_way_from_rest(np.asarray(ctx.sig.twist), np.asarray(ctx.sig.omega_l)):
+            fractions += tuple(ctx.option(self, "dahl_wide_fractions"))
+            if ctx.option(self, "dahl_initial"):
+                starts = (0.0, -1.0, 1.0)
         return [
-            Candidate.of(TwistHysteresis(torque_scale=f * ctx.rated_torque, compliance=k))
+            Candidate.of(
+                TwistHysteresis(torque_scale=f * ctx.rated_torque, compliance=k, initial=z0)
+            )
             for f in fractions
+            for z0 in starts
         ]

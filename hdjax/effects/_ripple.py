@@ -183,9 +183,16 @@ class RippleFamily(AbstractFamily):
             enough = keep.sum() >= MIN_RATIO_SAMPLES
             lo, hi = ctx.option(self, f"ripple_orders_{suffix}")
             span = float(np.ptp(np.asarray(ctx.sig.get(signal))))
-            if span <= 0.0:
+            periods = ctx.option(self, "ripple_min_periods")
+            lo = max(lo, periods * 2.0 * math.pi / span) if span > 0.0 else math.inf
+            if lo > hi:
+                ctx.cannot_identify(
+                    f"ripple:{signal}",
+                    f"{signal} turns through {span:.3g} rad, fewer than {periods:g} periods of "
+                    f"the highest order searched ({hi:g})",
+                    f"record {periods * 2.0 * math.pi / hi:.3g} rad of {signal} or more",
+                )
                 continue
-            lo = max(lo, ctx.option(self, "ripple_min_periods") * 2.0 * math.pi / span)
             orders = ctx.spectrum_orders(
                 signal,
                 (lo, hi),

@@ -34,6 +34,12 @@ from ._params import (
     song_params as song_params,
     with_effects as with_effects,
 )
+from ._real_log import (
+    RealLogSensors as RealLogSensors,
+    real_log as real_log,
+    simulate_real_log as simulate_real_log,
+    sweep_drive as sweep_drive,
+)
 from ._scenarios import (
     SCENARIOS as SCENARIOS,
     scenario_drive as scenario_drive,

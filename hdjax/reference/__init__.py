@@ -11,6 +11,7 @@ from ._builder import (
     build_wrench_reference as build_wrench_reference,
     joint_torque as joint_torque,
 )
+from ._checks import reference_checks as reference_checks
 from ._dh import (
     CONVENTIONS as CONVENTIONS,
     DHArm as DHArm,
