@@ -20,6 +20,7 @@ import numpy as np
 from .._custom_types import Array, Float, SamplesLike
 from .._features import Signals
 from ._base import AbstractFamily, AbstractTorqueFreeTerm, Candidate, CandidateContext
+from ._c import AbstractCEmitter, CSnippet
 from ._fields import hyper, labels, rounded
 
 
@@ -41,6 +42,11 @@ class TwistRate(AbstractTorqueFreeTerm):
         self, sig: Signals, torque: SamplesLike | None = None
     ) -> Float[np.ndarray, "n 1"]:
         return self._column(np.asarray(sig.omega_m), np.asarray(sig.omega_l))[:, None]
+
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """The scaled twist rate for the exported estimator."""
+        rate = f"({c.signal('omega_l')} - {c.signal('omega_m')} / {c.num(self.ratio)})"
+        return CSnippet(columns=(f"{c.num(self.sign)} * {rate} / {c.num(self.scale)}",))
 
     def _column(self, omega_m, omega_l):
         # the same arithmetic for JAX and NumPy arrays

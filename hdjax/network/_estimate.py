@@ -10,7 +10,9 @@ from ._features import build_features
 from ._mlp import Network, predict
 
 
-def predict_torque(network: Network, recording: Recording, joint: Joint) -> Float[Array, " n"]:
+def predict_torque(
+    network: Network, recording: Recording, joint: Joint, *, causal: bool = False
+) -> Float[Array, " n"]:
     """Predict the output torque of every sample of `recording` with a trained network.
 
     The input vector is built with the options the network was trained with (its stored
@@ -21,6 +23,8 @@ def predict_torque(network: Network, recording: Recording, joint: Joint) -> Floa
     - `network`: a trained [`hdjax.network.Network`][].
     - `recording`: the [`hdjax.Recording`][] to estimate on (no torque needed).
     - `joint`: the [`hdjax.Joint`][].
+    - `causal`: build every sample's input from that sample and earlier ones only (see
+      [`hdjax.network.build_features`][]), as `hdjax export`'s C code does.
 
     **Returns:** torque [N·m], shape `(n,)`.
     """
@@ -30,6 +34,11 @@ def predict_torque(network: Network, recording: Recording, joint: Joint) -> Floa
         )
     lay = network.layout
     feats = build_features(
-        recording, joint, periodic=lay.periodic, orders=lay.orders or (1, 2), kalman=lay.kalman
+        recording,
+        joint,
+        periodic=lay.periodic,
+        orders=lay.orders or (1, 2),
+        kalman=lay.kalman,
+        causal=causal,
     )
     return predict(network, feats)
