@@ -170,10 +170,14 @@ def test_causal_estimate_differs_from_the_recording_estimate_only_at_its_first_s
     model_cases,
 ):
     # velocity = "difference": only the first sample's velocity (the second's, or at rest)
-    case = model_cases["paper_per_segment"]
-    whole = np.asarray(estimate_torque(case.kw["model"], case.recording).torque)
-    assert whole[0] != case.torque[0]
-    np.testing.assert_array_equal(whole[1:], case.torque[1:])
+    model = model_cases["paper_per_segment"].kw["model"]
+    r = model_cases["paper_per_segment"].recording
+    # angles away from 0 at the start, so that the kinematic terms read the first velocity
+    rec = hdjax.make_recording(r.t, r.theta_m + 5.0, r.theta_l + 0.05, r.current)
+    whole = np.asarray(estimate_torque(model, rec).torque)
+    causal = np.asarray(estimate_torque(model, rec, causal=True).torque)
+    assert whole[0] != causal[0]
+    np.testing.assert_array_equal(whole[1:], causal[1:])
 
 
 def test_smoothed_velocity_needs_its_causal_form(model_cases):

@@ -2,19 +2,17 @@
 checked against (`test_vectors.csv`, read by `hdjax_check.c`).
 
 Without a recording of the user's, [`synthetic_recording`][] makes one that sweeps the
-calibrated torque range: the twist is the model's own forward prediction (eq. (10)) of a
+calibrated torque range: the twist is the model's flexspline compliance (eq. (7)) along a
 torque path, so the estimate visits every segment, and the angles and current move the way a
 joint's do.
 """
 
 from __future__ import annotations
 
-import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Float, Shaped
 from .._errors import ExportError
-from .._features import signals
 from .._io import csv_bytes
 from .._joint import Joint
 from .._recording import Recording, make_recording
@@ -49,8 +47,8 @@ def synthetic_recording(
     The torque is $0.95\,T_{max}\sin(2\pi f t)$ plus a slower ripple, the load angle a sway
     plus a drift (so both velocities change sign and the kinematic terms turn), the current
     the torque over the rated torque times the current polynomial's scale. With `model`, the
-    twist is the model's forward prediction (eq. (10), two fixed-point passes through the motor
-    angle it depends on); with `network`, the inputs move within the training spread it stores.
+    twist is that of the model's flexspline compliance (eq. (7)) at the torque; with `network`,
+    the inputs move within the training spread it stores.
 
     **Arguments:** `joint`; `n` samples every `dt` seconds; `model` or `network`; `extras`
     (extra columns to add, each moving around the centre and scale a `Column` term of the
@@ -85,13 +83,13 @@ def synthetic_recording(
     theta_l = 0.4 * np.sin(0.2 * phase) + 0.05 * t
     scale = next((tm.scale for tm in model.base_terms if isinstance(tm, CurrentPolynomial)), 1.0)
     current = torque / model.rated_torque * scale
+    # the flexspline's twist of eq. (7) at that torque (the other terms only shift the estimate
+    # a little; computed in NumPy, so that no program is compiled for it)
+    k = np.asarray(model.k, np.float64)
+    k = np.where(k > 0, k, np.max(k))  # a segment left out of the calibration: the stiffest
     twist = np.zeros(n)
-    for _ in range(2):
-        theta_m = joint.ratio * (theta_l - joint.twist_sign * twist)
-        rec = make_recording(t, theta_m, theta_l, current, None, cols, check_units=False)
-        # hysteresis of the torque path follows `torque` itself here
-        sig = signals(rec, joint, velocity=model.velocity)
-        twist = np.asarray(model.predict_twist(sig, jnp.asarray(torque)))
+    for (lo_j, hi_j), kj in zip(model.segment_bounds, k):
+        twist += kj * (np.clip(torque, lo_j, hi_j) - min(max(0.0, lo_j), hi_j))
     theta_m = joint.ratio * (theta_l - joint.twist_sign * twist)
     return make_recording(t, theta_m, theta_l, current, None, cols, source="test vectors")
 
