@@ -191,6 +191,22 @@ def experiment_inputs(exp) -> list:
     return paths
 
 
+def add_model_options(p: argparse.ArgumentParser, use: str) -> None:
+    """`--model` (a model file or the result folder holding it) and `--method` (which of its
+    estimators; `use` the verb of its help: "use", "export")."""
+    p.add_argument(
+        "--model",
+        required=True,
+        help="a model file written by 'hdjax run' (model.json), or the result folder holding it",
+    )
+    p.add_argument(
+        "--method",
+        choices=("model", "network"),
+        default="model",
+        help=f"which estimator of the file to {use} (default: the compliance model)",
+    )
+
+
 def model_file(path) -> Path:
     """The model file `path` names: the file itself, or the `model.json` of a result folder
     (`ConfigError` for a folder without one)."""

@@ -16,7 +16,15 @@ from ..config import check_compatible, load_model
 from ..config._saved_model import angle_ratio_mismatch
 from ..network import predict_torque as net_estimate
 from ..report import check_output_file
-from ._common import Progress, add_command, add_flag, add_quiet, model_file, read_column_map
+from ._common import (
+    Progress,
+    add_command,
+    add_flag,
+    add_model_options,
+    add_quiet,
+    model_file,
+    read_column_map,
+)
 
 HELP = "estimate torque on a new recording with a saved model (CSV in, CSV out)"
 EXAMPLE = """\
@@ -31,19 +39,9 @@ a reference torque, torque_measured is added and the RMS / maximum error go to s
 
 def add_parser(sub) -> None:
     p = add_command(sub, "estimate", HELP, EXAMPLE)
-    p.add_argument(
-        "--model",
-        required=True,
-        help="a model file written by 'hdjax run' (model.json), or the result folder holding it",
-    )
+    add_model_options(p, "use")
     p.add_argument("--data", required=True, help="the recording (.csv or .npz)")
     p.add_argument("--out", required=True, help="where to write the estimate (.csv)")
-    p.add_argument(
-        "--method",
-        choices=("model", "network"),
-        default="model",
-        help="which estimator of the file to use (default: the compliance model)",
-    )
     p.add_argument(
         "--columns",
         help="TOML file whose [data] table maps the file's columns (columns/extras, as in an "

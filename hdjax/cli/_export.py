@@ -15,6 +15,7 @@ from ._common import (
     Progress,
     add_command,
     add_flag,
+    add_model_options,
     add_quiet,
     model_file,
     read_column_map,
@@ -38,18 +39,8 @@ The step uses the present sample and earlier ones only; it equals 'hdjax estimat
 def add_parser(sub) -> None:
     """Register `export` with the `hdjax` command's sub-parsers."""
     p = add_command(sub, "export", HELP, EXAMPLE)
-    p.add_argument(
-        "--model",
-        required=True,
-        help="a model file written by 'hdjax run' (model.json), or the result folder holding it",
-    )
+    add_model_options(p, "export")
     p.add_argument("--out", required=True, help="the folder to write the C code into")
-    p.add_argument(
-        "--method",
-        choices=("model", "network"),
-        default="model",
-        help="which estimator of the file to export (default: the compliance model)",
-    )
     p.add_argument(
         "--precision",
         choices=("double", "single"),

@@ -42,6 +42,17 @@ def _sum_products(pairs) -> str:
     return " + ".join(f"{a} * {b}" for a, b in pairs)
 
 
+def _clip(x: str, lo: float, hi: float, n) -> str:
+    """`jnp.clip(x, lo, hi)` in C, one-sided for an unbounded segment."""
+    if math.isfinite(lo) and math.isfinite(hi):
+        return f"hdjax_clip({x}, {n(lo)}, {n(hi)})"
+    if math.isfinite(lo):
+        return f"({x} > {n(lo)} ? {x} : {n(lo)})"
+    if math.isfinite(hi):
+        return f"({x} < {n(hi)} ? {x} : {n(hi)})"
+    return x
+
+
 def _group_sum(cols, coef, em) -> str:
     return _sum_products((col, em.num(c)) for col, c in zip(cols, coef))
 
@@ -146,14 +157,7 @@ def _solve(model: ComplianceModel, code: _Code, em: Emitter) -> str:
         else:
             dist = f"hdjax_max({parts[0]}, {parts[1]})"
         width = (hi - lo) if math.isfinite(hi - lo) else default_width
-        if math.isfinite(lo) and math.isfinite(hi):
-            clip = f"hdjax_clip(ts, {n(lo)}, {n(hi)})"
-        elif math.isfinite(lo):
-            clip = f"(ts > {n(lo)} ? ts : {n(lo)})"
-        elif math.isfinite(hi):
-            clip = f"(ts < {n(hi)} ? ts : {n(hi)})"
-        else:
-            clip = "ts"
+        clip = _clip("ts", lo, hi, n)
         body = [
             f"/* segment {s}: [{lo:.6g}, {hi:.6g}) N m */",
             f"const {R} ts = (r - {h} - {n(off)}) / {den};",
@@ -191,15 +195,7 @@ def _solve(model: ComplianceModel, code: _Code, em: Emitter) -> str:
         hinge = []
         for (lo, hi), kj in zip(bounds, k):
             zero = min(max(0.0, lo), hi)
-            if math.isfinite(lo) and math.isfinite(hi):
-                c = f"hdjax_clip(t, {n(lo)}, {n(hi)})"
-            elif math.isfinite(lo):
-                c = f"(t > {n(lo)} ? t : {n(lo)})"
-            elif math.isfinite(hi):
-                c = f"(t < {n(hi)} ? t : {n(hi)})"
-            else:
-                c = "t"
-            hinge.append((f"({c} - {n(zero)})", n(kj)))
+            hinge.append((f"({_clip('t', lo, hi, n)} - {n(zero)})", n(kj)))
         knots = " + ".join(f"(t >= {n(kn)})" for kn in model.knots) or "0"
         k_arr = ", ".join(n(kj) for kj in k)
         body = [

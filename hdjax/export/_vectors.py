@@ -112,18 +112,10 @@ def expected(
             | np.asarray(est.unresolved).astype(np.uint32) * 4
         )
         return np.asarray(est.torque, np.float64), flags
-    from ..network import build_features
+    from ..network._estimate import network_features
 
-    lay = network.layout
     torque = np.asarray(predict_torque(network, recording, joint, causal=True), np.float64)
-    feats = build_features(
-        recording,
-        joint,
-        periodic=lay.periodic,
-        orders=lay.orders or (1, 2),
-        kalman=lay.kalman,
-        causal=True,
-    )
+    feats = network_features(network, recording, joint, causal=True)
     from ._network import INPUT_SIGMAS
 
     z = (np.asarray(feats.x) - np.asarray(network.x_mean)) / np.asarray(network.x_scale)

@@ -6,7 +6,7 @@ from .._custom_types import Array, Float
 from .._errors import ModelMismatchError
 from .._joint import Joint
 from .._recording import Recording
-from ._features import build_features
+from ._features import Features, build_features
 from ._mlp import Network, predict
 
 
@@ -32,8 +32,16 @@ def predict_torque(
         raise ModelMismatchError(
             f"predict_torque needs an hdjax.network.Network, got {type(network).__name__}"
         )
+    return predict(network, network_features(network, recording, joint, causal=causal))
+
+
+def network_features(
+    network: Network, recording: Recording, joint: Joint, *, causal: bool = False
+) -> Features:
+    """The input vector of every sample, built with the options `network` was trained with
+    (its stored [`hdjax.network.FeatureLayout`][]; see [`hdjax.network.build_features`][])."""
     lay = network.layout
-    feats = build_features(
+    return build_features(
         recording,
         joint,
         periodic=lay.periodic,
@@ -41,4 +49,3 @@ def predict_torque(
         kalman=lay.kalman,
         causal=causal,
     )
-    return predict(network, feats)
