@@ -57,8 +57,9 @@ def velocity_notes(what: str, velocity: str, causal: bool, half_window: int) -> 
         return (
             "Velocities are the backward difference of eqs. (13)-(14). The first sample after "
             "hdjax_init has no earlier one and is at rest (velocity 0), where the estimate of "
-            "a whole recording copies the second sample's velocity; every later sample equals "
-            "the estimate of the recording (hdjax estimate --causal equals it everywhere).",
+            "a whole recording copies the second sample's velocity. Later samples read the same "
+            "velocities (only a hysteresis state driven by the estimated torque carries the "
+            "first sample's difference on); hdjax estimate --causal equals the step everywhere.",
         )
     if velocity != "smoothed":
         raise ExportError(f"{what} derives velocities by {velocity!r}, which has no C code")
