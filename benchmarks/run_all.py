@@ -43,6 +43,7 @@ QUICK = {
     "bench_fleet.py": ["--samples", "5000", "--logs", "4"],
     "bench_stream_parquet.py": ["--samples", "4000000", "--reference-samples", "500000"],
     "bench_warm_start.py": ["--samples", "20000"],
+    "bench_export.py": ["--duration", "5", "--samples", "200000", "--check", "20000"],
 }
 
 

@@ -20,6 +20,7 @@ Sub-packages (imported on first access, so `import hdjax` stays light):
 - `hdjax.pipelines`: the experiment pipelines (the paper run, method comparison, periodic
   features) above the model packages.
 - `hdjax.report`: metrics, figures and reports.
+- `hdjax.export`: a calibrated model as dependency-free C code with a per-sample step.
 """
 
 from ._interrupts import guard_startup as _guard_startup
@@ -38,6 +39,7 @@ from ._errors import (  # noqa: E402
     ConfigError as ConfigError,
     DataError as DataError,
     DivergenceError as DivergenceError,
+    ExportError as ExportError,
     HdjaxError as HdjaxError,
     InversionError as InversionError,
     ModelMismatchError as ModelMismatchError,
@@ -81,6 +83,7 @@ _SUBPACKAGES = (
     "pipelines",
     "report",
     "config",
+    "export",
 )
 
 

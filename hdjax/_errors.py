@@ -33,6 +33,10 @@ class ModelMismatchError(HdjaxError, ValueError):
     """A saved or fitted model does not match the data it is applied to."""
 
 
+class ExportError(HdjaxError, ValueError):
+    """A model cannot be exported to C (a term without C code, an estimate that reads ahead)."""
+
+
 class DivergenceError(HdjaxError, RuntimeError):
     """An iterative fit or simulation diverged (non-finite loss or state)."""
 

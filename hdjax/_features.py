@@ -49,18 +49,21 @@ def twist(
 
 
 @eqx.filter_jit
-def _backward_difference(t, theta):
+def _backward_difference(t, theta, causal: bool):
     v = jnp.diff(theta) / jnp.diff(t)
-    return jnp.concatenate([v[:1], v])
+    # the first sample has no earlier one: the second's value, or (causal) at rest
+    first = jnp.zeros_like(v[:1]) if causal else v[:1]
+    return jnp.concatenate([first, v])
 
 
 def finite_difference_velocity(
-    t: Float[ArrayLike, " ..."], theta: Float[ArrayLike, " ..."]
+    t: Float[ArrayLike, " ..."], theta: Float[ArrayLike, " ..."], *, causal: bool = False
 ) -> Float[Array, " n"]:
     r"""Angular velocity by the paper's backward difference, Song et al. eqs. (13)-(14).
 
     $\omega_k = (\theta_k - \theta_{k-1}) / (t_k - t_{k-1})$ with the actual time stamps (so
-    jitter and gaps are honoured); the first sample takes the second's value.
+    jitter and gaps are honoured). The first sample has no earlier one: it takes the second's
+    value, or, with `causal`, 0 (what a controller computing one sample at a time knows then).
     """
     t = jnp.asarray(t, jnp.float64)
     theta = jnp.asarray(theta, jnp.float64)
@@ -68,13 +71,16 @@ def finite_difference_velocity(
         raise DataError(
             f"t and theta must be 1-D of one length >= 2, got {t.shape} and {theta.shape}"
         )
-    return _backward_difference(t, theta)
+    return _backward_difference(t, theta, bool(causal))
 
 
 @eqx.filter_jit
-def _local_slope(t, theta, half_window: int):
+def _local_slope(t, theta, half_window: int, causal: bool):
     n = t.shape[0]
-    offsets = jnp.arange(-half_window, half_window + 1)
+    # the window: centred, or (causal) the 2h + 1 samples up to and including this one
+    offsets = (
+        jnp.arange(-2 * half_window, 1) if causal else jnp.arange(-half_window, half_window + 1)
+    )
     idx = jnp.clip(jnp.arange(n)[:, None] + offsets[None, :], 0, n - 1)
     tw = t[idx] - t[:, None]
     xw = theta[idx] - theta[:, None]  # local reference keeps float64 precision on big angles
@@ -87,17 +93,27 @@ def _local_slope(t, theta, half_window: int):
     xm = (first * xw).sum(axis=1, keepdims=True) / wsum
     num = (first * (tw - tm) * (xw - xm)).sum(axis=1)
     den = (first * (tw - tm) ** 2).sum(axis=1)
-    return num / den
+    # a window of one distinct sample (the first of a causal window) has no slope: at rest
+    return jnp.where(den > 0, num / jnp.where(den > 0, den, 1.0), 0.0)
 
 
 def smoothed_velocity(
-    t: Float[ArrayLike, " ..."], theta: Float[ArrayLike, " ..."], half_window: int = 5
+    t: Float[ArrayLike, " ..."],
+    theta: Float[ArrayLike, " ..."],
+    half_window: int = 5,
+    *,
+    causal: bool = False,
 ) -> Float[Array, " n"]:
     """Angular velocity by a local least-squares line over `2*half_window+1` samples.
 
     A smoothing alternative to eqs. (13)-(14) that uses the actual (jittered) time stamps; its
     noise falls as $h^{-3/2}$ with the window half-width $h$, at the price of a delay-free but
     wider low-pass. Windows are clipped at the ends.
+
+    The centred window reads `half_window` samples ahead of each estimate. With `causal` the
+    window is the `2*half_window+1` samples up to and including the present one (what a
+    controller has): the same noise, but the slope it gives is that of `half_window` samples
+    ago (a delay of `half_window` sample periods). The first sample's velocity is then 0.
     """
     if not isinstance(half_window, int) or half_window < 1:
         raise DataError(f"half_window must be a positive integer, got {half_window!r}")
@@ -107,7 +123,7 @@ def smoothed_velocity(
         raise DataError(
             f"t and theta must be 1-D of one length >= 2, got {t.shape} and {theta.shape}"
         )
-    return _local_slope(t, theta, half_window)
+    return _local_slope(t, theta, half_window, bool(causal))
 
 
 def find_gaps(t: Float[ArrayLike, " n"], factor: float = 3.0) -> Int[np.ndarray, " n_gaps"]:
@@ -185,14 +201,15 @@ def derive_signals(
     *,
     velocity: str = "difference",
     half_window: int = 5,
+    causal: bool = False,
 ) -> Signals:
     """[`hdjax.signals`][] with the joint given by its ratio and twist sign (both required)."""
     if velocity not in VELOCITY_METHODS:
         raise DataError(f"velocity must be one of {VELOCITY_METHODS}, got {velocity!r}")
     diff = (
-        finite_difference_velocity
+        (lambda t, x: finite_difference_velocity(t, x, causal=causal))
         if velocity == "difference"
-        else (lambda t, x: smoothed_velocity(t, x, half_window))
+        else (lambda t, x: smoothed_velocity(t, x, half_window, causal=causal))
     )
     return Signals(
         twist=twist(recording.theta_m, recording.theta_l, ratio, twist_sign),
@@ -208,7 +225,12 @@ def derive_signals(
 
 @typing.no_type_check  # checks `joint` itself: the older call signals(rec, ratio) gets a reason
 def signals(
-    recording: Recording, joint: Joint, *, velocity: str = "difference", half_window: int = 5
+    recording: Recording,
+    joint: Joint,
+    *,
+    velocity: str = "difference",
+    half_window: int = 5,
+    causal: bool = False,
 ) -> Signals:
     """The signals every model reads, from a recording and its joint (Song et al. eqs. (5),
     (11)-(14)).
@@ -219,11 +241,20 @@ def signals(
     - `joint`: the [`hdjax.Joint`][]: its ratio and twist sign give the twist of eq. (5).
     - `velocity`: `"difference"`, the paper's backward difference (eqs. (13)-(14)), or
       `"smoothed"`, a local least-squares line over `2*half_window+1` samples.
+    - `causal`: derive every sample's velocities from that sample and earlier ones only, as a
+      controller computing one sample at a time does (what `hdjax export` generates): the
+      first sample is at rest, and the smoothed line uses the window ending at the sample
+      (see [`hdjax.smoothed_velocity`][]).
 
     **Returns:** [`hdjax.Signals`][] (twist with the joint's sign, velocities, extras, time).
     """
     if not isinstance(joint, Joint):
         raise DataError(f"signals() needs an hdjax.Joint, got {type(joint).__name__}")
     return derive_signals(
-        recording, joint.ratio, joint.twist_sign, velocity=velocity, half_window=half_window
+        recording,
+        joint.ratio,
+        joint.twist_sign,
+        velocity=velocity,
+        half_window=half_window,
+        causal=causal,
     )

@@ -22,7 +22,7 @@ import pytest
 from jaxtyping import Array, Float
 
 import hdjax
-from hdjax import effects, plant
+from hdjax import effects, export, plant
 from hdjax.compliance import ComplianceModel, estimate_torque, signals_from_recording
 from hdjax.config import load_model, save_model
 from hdjax.discover import DiscoverOptions, LibraryOptions, discover, report_dict
@@ -43,6 +43,11 @@ class Drag(effects.AbstractSignalTerm):
 
     def transform(self, x, xp):
         return x * xp.abs(x) / self.scale**2
+
+    def c_code(self, c):
+        # the column for the exported C estimator (docs/adding-an-effect.md)
+        x = c.signal(self.signal)
+        return effects.CSnippet(columns=(f"{x} * {c.fn('fabs')}({x}) / {c.num(self.scale**2)}",))
 
 
 class QuadraticDrag(effects.AbstractFriction):
@@ -127,6 +132,11 @@ def test_toy_family_simulate_discover_save_load_estimate(toy, recordings, tmp_pa
     np.testing.assert_array_equal(t_loaded, t_fitted)
     rms = float(np.sqrt(np.mean((t_loaded - np.asarray(test.torque)) ** 2)))
     assert rms == pytest.approx(res.aux.final.rms, rel=1e-9)
+    # the exported C step equals the causal estimate (its c_code, as the docs write it)
+    if export.find_compiler() is not None:
+        lib = export.build_library(export.compliance_c(loaded), tmp_path / "c")
+        causal = np.asarray(estimate_torque(loaded, test, causal=True).torque)
+        assert np.max(np.abs(lib.run(test)[0] - causal)) <= 1e-9
 
 
 def test_unregistered_term_type_is_refused_with_a_message(toy, tmp_path):

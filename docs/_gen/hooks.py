@@ -2,7 +2,8 @@
 
 - The command, experiment-file and API reference pages are generated from the code on every
   build (`reference.py`), so they cannot drift from it; they are never committed.
-- The table of effect families replaces its marker in a page (`reference.FAMILIES_MARKER`).
+- The table of effect families replaces its marker in a page (`reference.FAMILIES_MARKER`), and
+  the export page's tables theirs (`export_tables`, from the benchmark snapshot).
 - Navigation entries whose page does not exist are dropped (with a note in the build log), and
   every page under docs/ that the navigation does not list is appended under "More", so a page
   added to docs/ is always reachable.
@@ -18,6 +19,7 @@ from mkdocs.structure.files import File
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+import export_tables  # noqa: E402
 import reference  # noqa: E402
 
 log = logging.getLogger("mkdocs.hooks.hdjax")
@@ -103,6 +105,10 @@ def on_config(config):
 def on_page_markdown(markdown, page, config, files):
     if reference.FAMILIES_MARKER in markdown:
         markdown = markdown.replace(reference.FAMILIES_MARKER, reference.effect_families_table())
+    if export_tables.STEP_MARKER in markdown:
+        markdown = markdown.replace(export_tables.STEP_MARKER, export_tables.step_table())
+    if export_tables.CAUSALITY_MARKER in markdown:
+        markdown = markdown.replace(export_tables.CAUSALITY_MARKER, export_tables.causality_table())
     return markdown
 
 

@@ -1,4 +1,5 @@
-"""The `hdjax` command: `run`, `sweep`, `estimate`, `discover` and `bench`.
+"""The `hdjax` command: `run`, `sweep`, `estimate`, `discover`, `bench`, `convert`, `fleet` and
+`export`.
 
 Every [`hdjax.HdjaxError`][], usage error and user-caused `OSError` becomes one line on stderr
 (`hdjax: error: <file>: <what went wrong>; <what to do>`) and exit code 2; an unknown command
@@ -31,6 +32,7 @@ _MODULES = {
     "bench": "hdjax.cli._bench",
     "convert": "hdjax.cli._convert",
     "fleet": "hdjax.cli._fleet",
+    "export": "hdjax.cli._export",
 }
 COMMANDS = tuple(_MODULES)
 

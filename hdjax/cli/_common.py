@@ -191,6 +191,36 @@ def experiment_inputs(exp) -> list:
     return paths
 
 
+def add_model_options(p: argparse.ArgumentParser, use: str) -> None:
+    """`--model` (a model file or the result folder holding it) and `--method` (which of its
+    estimators; `use` the verb of its help: "use", "export")."""
+    p.add_argument(
+        "--model",
+        required=True,
+        help="a model file written by 'hdjax run' (model.json), or the result folder holding it",
+    )
+    p.add_argument(
+        "--method",
+        choices=("model", "network"),
+        default="model",
+        help=f"which estimator of the file to {use} (default: the compliance model)",
+    )
+
+
+def model_file(path) -> Path:
+    """The model file `path` names: the file itself, or the `model.json` of a result folder
+    (`ConfigError` for a folder without one)."""
+    path = Path(path)
+    if path.is_dir():
+        if not (path / "model.json").is_file():
+            raise ConfigError(
+                f"{path}: a folder without model.json; give the model.json written by "
+                "'hdjax run' (with [outputs] save_model = true)"
+            )
+        return path / "model.json"
+    return path
+
+
 def read_column_map(path):
     """The [`hdjax.ColumnMap`][] of a TOML file's `[data]` table (or of its top level):
     `columns`, `extras` and the CSV text `encoding`; other keys of the table are ignored, so an

@@ -6,7 +6,7 @@ from pathlib import Path
 
 # compliance.estimate_torque is looked up at each call (a test stops the command there)
 from .. import compliance
-from .._errors import ConfigError, DataError, ModelMismatchError, UnitWarning
+from .._errors import DataError, ModelMismatchError, UnitWarning
 from .._formats import load_recording
 from .._io import atomic_write_bytes, csv_bytes
 from .._joint import load_joint
@@ -16,7 +16,15 @@ from ..config import check_compatible, load_model
 from ..config._saved_model import angle_ratio_mismatch
 from ..network import predict_torque as net_estimate
 from ..report import check_output_file
-from ._common import Progress, add_command, add_flag, add_quiet, read_column_map
+from ._common import (
+    Progress,
+    add_command,
+    add_flag,
+    add_model_options,
+    add_quiet,
+    model_file,
+    read_column_map,
+)
 
 HELP = "estimate torque on a new recording with a saved model (CSV in, CSV out)"
 EXAMPLE = """\
@@ -31,19 +39,9 @@ a reference torque, torque_measured is added and the RMS / maximum error go to s
 
 def add_parser(sub) -> None:
     p = add_command(sub, "estimate", HELP, EXAMPLE)
-    p.add_argument(
-        "--model",
-        required=True,
-        help="a model file written by 'hdjax run' (model.json), or the result folder holding it",
-    )
+    add_model_options(p, "use")
     p.add_argument("--data", required=True, help="the recording (.csv or .npz)")
     p.add_argument("--out", required=True, help="where to write the estimate (.csv)")
-    p.add_argument(
-        "--method",
-        choices=("model", "network"),
-        default="model",
-        help="which estimator of the file to use (default: the compliance model)",
-    )
     p.add_argument(
         "--columns",
         help="TOML file whose [data] table maps the file's columns (columns/extras, as in an "
@@ -65,6 +63,13 @@ def add_parser(sub) -> None:
         "estimate even when the angles look wrong for the model (degrees instead of radians, "
         "or a motor/output angle ratio other than the model's); refused by default",
     )
+    add_flag(
+        p,
+        "--causal",
+        "estimate each sample from it and earlier ones only, as a controller does (what the C "
+        "code of 'hdjax export' computes): the first sample at rest, a smoothed velocity over "
+        "the window ending at the sample",
+    )
     add_quiet(p)
 
 
@@ -80,13 +85,7 @@ def command(args, parser) -> int:
     check_output_file(
         out, inputs=inputs, overwrite=args.overwrite, ours=is_estimate, example="torque.csv"
     )
-    if model_path.is_dir():
-        if not (model_path / "model.json").is_file():
-            raise ConfigError(
-                f"{model_path}: a folder without model.json; give the model.json written by "
-                "'hdjax run' (with [outputs] save_model = true)"
-            )
-        model_path = model_path / "model.json"
+    model_path = model_file(model_path)
     check_read_memory([args.data], fix="split the log into shorter files and estimate each")
     saved = load_model(model_path)
     cmap = read_column_map(args.columns) if args.columns else None
@@ -115,13 +114,14 @@ def command(args, parser) -> int:
     if args.method == "network":
         if saved.network is None:
             raise ModelMismatchError(f"{model_path}: holds no network; use --method model")
-        cols["torque_estimate"] = np.asarray(net_estimate(saved.network, rec, saved.joint))
+        net = net_estimate(saved.network, rec, saved.joint, causal=args.causal)
+        cols["torque_estimate"] = np.asarray(net)
     else:
         if saved.compliance is None:
             raise ModelMismatchError(
                 f"{model_path}: holds no compliance model; use --method network"
             )
-        est = compliance.estimate_torque(saved.compliance, rec)
+        est = compliance.estimate_torque(saved.compliance, rec, causal=args.causal)
         cols["torque_estimate"] = np.asarray(est.torque)
         cols["in_range"] = np.asarray(est.in_range).astype(np.float64)
     if rec.torque is not None:

@@ -40,7 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, Bool, Float, Int
-from .._errors import InversionError, ModelMismatchError
+from .._errors import ConfigError, InversionError, ModelMismatchError
 from .._features import signals
 from .._recording import Recording
 from ..effects import SEGMENT_START
@@ -294,7 +294,9 @@ def _newton(model, t, seg, r, hs, g, terms):
     return jax.lax.fori_loop(0, NEWTON_STEPS, body, t)
 
 
-def estimate_torque(model: ComplianceModel, data: Recording | Signals) -> TorqueEstimate:
+def estimate_torque(
+    model: ComplianceModel, data: Recording | Signals, *, causal: bool = False
+) -> TorqueEstimate:
     """Estimate the output torque from twist, current and angles (eqs. (26)-(27)).
 
     **Arguments:**
@@ -302,6 +304,10 @@ def estimate_torque(model: ComplianceModel, data: Recording | Signals) -> Torque
     - `model`: a calibrated [`hdjax.compliance.ComplianceModel`][].
     - `data`: a [`hdjax.Recording`][] (its `torque`, if any, is not used) or
       [`hdjax.compliance.Signals`][].
+    - `causal`: estimate every sample from that sample and earlier ones only, as a controller
+      computing one sample at a time does (the estimate `hdjax export`'s C code computes): the
+      velocities are derived causally ([`hdjax.signals`][] with `causal=True`). The inversion
+      itself is causal either way. Only for a `Recording` (`Signals` carry their velocities).
 
     **Returns:** a [`hdjax.compliance.TorqueEstimate`][] (torque and per-sample flags; see the
     module docstring for the segment rules).
@@ -310,7 +316,13 @@ def estimate_torque(model: ComplianceModel, data: Recording | Signals) -> Torque
     """
     _check_estimable(model)
     if isinstance(data, Recording):
-        data = signals(data, model.joint, velocity=model.velocity)
+        data = signals(data, model.joint, velocity=model.velocity, causal=causal)
+    elif causal:
+        raise ConfigError(
+            "causal=True derives the velocities from a Recording; these Signals carry their "
+            "velocities already (pass the Recording, or derive the Signals with "
+            "hdjax.signals(..., causal=True))"
+        )
     missing = [
         name
         for term in model.base_terms + model.effect_terms

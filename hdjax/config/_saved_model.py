@@ -105,20 +105,24 @@ def _network_from_dict(d: dict):
     layout = FeatureLayout(
         tuple(lay["names"]), bool(lay["periodic"]), tuple(lay["orders"]), bool(lay["kalman"])
     )
-    net = Network(
-        layout,
-        tuple(d["hidden"]),
-        key=jax.random.PRNGKey(0),
-        x_mean=d["x_mean"],
-        x_scale=d["x_scale"],
-        y_mean=d["y_mean"],
-        y_scale=d["y_scale"],
-    )
+    hidden = tuple(d["hidden"])
+    # the structure only (traced, not compiled: drawing the initial weights would compile a
+    # program per layer, seconds for a file read); every array is the stored one
+    net = eqx.filter_eval_shape(lambda: Network(layout, hidden, key=jax.random.PRNGKey(0)))
     weights = tuple(jnp.asarray(w, jnp.float64) for w in d["weights"])
     biases = tuple(jnp.asarray(b, jnp.float64) for b in d["biases"])
-    if [w.shape for w in weights] != [w.shape for w in net.weights]:
+    if [w.shape for w in weights] != [w.shape for w in net.weights] or [
+        b.shape for b in biases
+    ] != [b.shape for b in net.biases]:
         raise DataError("network weights do not match the stored layer widths")
-    return eqx.tree_at(lambda n: (n.weights, n.biases), net, (weights, biases))
+    stats = [jnp.asarray(d[k], jnp.float64) for k in ("x_mean", "x_scale", "y_mean", "y_scale")]
+    if stats[0].shape != net.x_mean.shape or stats[1].shape != net.x_scale.shape:
+        raise DataError("network input statistics do not match the stored input layout")
+    return eqx.tree_at(
+        lambda n: (n.weights, n.biases, n.x_mean, n.x_scale, n.y_mean, n.y_scale),
+        net,
+        (weights, biases, *stats),
+    )
 
 
 def save_model(

@@ -33,6 +33,7 @@ from ._base import (
     CandidateContext as CandidateContext,
     PlantEffect as PlantEffect,
 )
+from ._c import AbstractCEmitter as AbstractCEmitter, CSnippet as CSnippet
 from ._coulomb import (
     Coulomb as Coulomb,
     CoulombFamily as CoulombFamily,

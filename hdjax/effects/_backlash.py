@@ -21,6 +21,7 @@ import numpy as np
 
 from .._custom_types import Array, Float, Pointwise, PointwiseOut
 from ._base import AbstractMemorylessTerm, AbstractPlantEffect, AbstractTorqueScaleFamily
+from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, hyper, labels
 
 
@@ -37,6 +38,14 @@ class Backlash(AbstractMemorylessTerm):
 
     def numpy_value(self, torque: Pointwise) -> Float[np.ndarray, "*shape"]:
         return np.tanh(np.asarray(torque) / self.width)
+
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """$\\tanh(T/T_b)$ and its slope for the exported estimator's Newton steps."""
+        w = c.num(self.width)
+        return CSnippet(
+            value=f"{c.fn('tanh')}({c.torque} / {w})",
+            slope=f"({c.num(1.0)} - {c.value} * {c.value}) / {w}",
+        )
 
 
 class LostMotion(AbstractPlantEffect):

@@ -115,10 +115,17 @@ class AbstractTerm(eqx.Module):
     with when `score_in_numpy`). `key` and `names` are often templates over the fields
     ([`labels`][]); a hyperparameter declared with
     `hyper(..., positive=True)` is checked here, at construction.
+
+    **For the exported estimator** (`hdjax export`), a term also defines
+    `c_code(c) -> CSnippet`: its columns as C code of one sample
+    ([`hdjax.effects.CSnippet`][], written with the exporter's
+    [`hdjax.effects.AbstractCEmitter`][]). A term that leaves `c_code` at `None` works
+    everywhere else, and the exporter refuses a model holding it.
     """
 
     torque_kind: eqx.AbstractClassVar[str]
     score_in_numpy: ClassVar[bool] = True
+    c_code: ClassVar[Callable | None] = None
 
     def __check_init__(self):
         if self.torque_kind not in TORQUE_KINDS:

@@ -24,6 +24,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, SamplesLike
 from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm, Candidate, CandidateContext
+from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, hyper, labels
 from ._friction import friction_effects, velocity_candidates
 
@@ -38,6 +39,12 @@ class Coulomb(AbstractSignalTerm):
 
     def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         return xp.tanh(x / self.omega_s)
+
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """The smooth sign for the exported estimator."""
+        return CSnippet(
+            columns=(f"{c.fn('tanh')}({c.signal(self.signal)} / {c.num(self.omega_s)})",)
+        )
 
 
 class CoulombFriction(AbstractFriction):

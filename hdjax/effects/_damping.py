@@ -21,6 +21,7 @@ import numpy as np
 from .._custom_types import Array, Float, SamplesLike
 from .._features import Signals
 from ._base import AbstractFamily, AbstractTorqueFreeTerm, Candidate, CandidateContext
+from ._c import AbstractCEmitter, CSnippet
 from ._fields import hyper, labels, rounded
 
 
@@ -48,6 +49,19 @@ class TwistRate(AbstractTorqueFreeTerm):
         self, sig: Signals, torque: SamplesLike | None = None
     ) -> Float[np.ndarray, "n 1"]:
         return self._column(np.asarray(sig.omega_m), np.asarray(sig.omega_l))[:, None]
+
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """The scaled twist rate for the exported estimator, one sample late (the previous
+        sample's rate; at the first, its own)."""
+        rate = f"({c.signal('omega_l')} - {c.signal('omega_m')} / {c.num(self.ratio)})"
+        now, prev, out = c.local("now"), c.state("prev"), c.state("out")
+        update = (
+            f"const {c.real} {now} = {c.num(self.sign)} * {rate} / {c.num(self.scale)};",
+            f"if ({c.first}) {prev} = {now};",
+            f"{out} = {prev};",
+            f"{prev} = {now};",
+        )
+        return CSnippet(columns=(out,), state=(("prev", 0.0), ("out", 0.0)), update=update)
 
     def _column(self, omega_m, omega_l):
         # the same arithmetic for JAX and NumPy arrays; one sample late (class docstring)

@@ -47,6 +47,7 @@ from ._base import (
     CandidateContext,
     PlantEffect,
 )
+from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, concrete, fmt, hyper, labels
 
 
@@ -262,6 +263,11 @@ class Hysteresis(AbstractPathTerm):
         see) takes precedence over `torque`."""
         return sig.extras.get(TORQUE_PATH, torque)
 
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """The Dahl state for the exported estimator: driven by the torque being estimated,
+        by the exporter's implicit step per sample (as the JAX estimate's), from 0."""
+        return CSnippet(path_scale=self.torque_scale, state=(("z", 0.0),))
+
     # the Dahl state of `dahl_driver` (shared by both hysteresis terms)
     columns = _dahl_column
     numpy_columns = _dahl_column_numpy
@@ -322,6 +328,34 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
     def dahl_driver(self, sig: Signals, torque: SamplesLike | None = None) -> Samples:
         """The path the Dahl state follows: the measured twist over the compliance."""
         return sig.twist / self.compliance
+
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """The Dahl state of the measured twist for the exported estimator: one step of
+        [`dahl_state`][] per sample, from 0 and without a step at the first sample; the column
+        is the state before this sample's step (one sample late, as the JAX column). A state
+        that starts at `initial` $\ne 0$ takes its sign from the first motion, which a
+        per-sample step has not seen yet: refused."""
+        if self.initial:
+            return CSnippet(
+                noncausal=(
+                    f"its state starts at {fmt(self.initial)} of the direction of the first "
+                    "motion, which lies after the start; calibrate with the state from 0 "
+                    "(initial = 0) to export"
+                )
+            )
+        z, prev, out = c.state("z"), c.state("prev"), c.state("out")
+        d, du = c.local("d"), c.local("du")
+        one = c.num(1.0)
+        update = (
+            f"const {c.real} {d} = {c.signal('twist')} / {c.num(self.compliance)};",
+            f"if ({c.first}) {prev} = {d};",
+            f"{out} = {z};",
+            f"const {c.real} {du} = ({d} - {prev}) / {c.num(self.torque_scale)};",
+            f"{z} = hdjax_clip({z} + {du} * ({one} - {z} * hdjax_sign({du})), -{one}, {one});",
+            f"{prev} = {d};",
+        )
+        state = (("z", 0.0), ("prev", 0.0), ("out", 0.0))
+        return CSnippet(columns=(out,), state=state, update=update)
 
     # the Dahl state of `dahl_driver` (shared by both hysteresis terms)
     columns = _dahl_column

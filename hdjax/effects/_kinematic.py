@@ -32,7 +32,22 @@ from ._base import (
     CandidateContext,
     both_sides,
 )
+from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, fmt, hyper
+
+
+def c_harmonic_pairs(c: AbstractCEmitter, arg: str, order: int, tag: str) -> tuple[list, list]:
+    """[`harmonic_pairs`][] in C: the statements declaring $\\cos nu, \\sin nu$, $n = 1..$`order`,
+    of the double expression `arg`, and their `(cos, sin)` local names."""
+    s1, c1 = c.local(f"s1{tag}"), c.local(f"c1{tag}")
+    lines = [c.sincos(arg, s1, c1)]
+    pairs = [(c1, s1)]
+    for n in range(2, order + 1):
+        (cp, sp), cn, sn = pairs[-1], c.local(f"c{n}{tag}"), c.local(f"s{n}{tag}")
+        lines.append(f"const {c.real} {cn} = {cp} * {c1} - {sp} * {s1};")
+        lines.append(f"const {c.real} {sn} = {sp} * {c1} + {cp} * {s1};")
+        pairs.append((cn, sn))
+    return lines, pairs
 
 
 def harmonic_pairs(u: PointwiseOut, order: int) -> list[tuple[PointwiseOut, PointwiseOut]]:
@@ -84,6 +99,20 @@ class PaperFourier(AbstractColumnListTerm):
             cols += [np.cos(n * ul), np.sin(n * ul), np.cos(n * um), np.sin(n * um)]
         return np.column_stack(cols)
 
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """Eq. (9)'s columns for the exported estimator: the harmonics of $\\theta\\omega$ of
+        each side by the angle-addition recurrence, as `column_list` computes them."""
+        lines_l, hl = c_harmonic_pairs(
+            c, f"{c.angle('theta_l')} * {c.angle('omega_l')}", self.order, "l"
+        )
+        lines_m, hm = c_harmonic_pairs(
+            c, f"{c.angle('theta_m')} * {c.angle('omega_m')}", self.order, "m"
+        )
+        cols = []
+        for (cl, sl), (cm, sm) in zip(hl, hm):
+            cols += [cl, sl, cm, sm]
+        return CSnippet(columns=tuple(cols), lines=tuple(lines_l + lines_m))
+
 
 class Harmonics(AbstractColumnListTerm):
     """Harmonics of one angle at a list of (possibly non-integer) orders: $\\cos(k\\theta),
@@ -113,6 +142,16 @@ class Harmonics(AbstractColumnListTerm):
     def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         th = np.asarray(sig.get(self.signal))
         return np.column_stack([f(k * th) for k in self.orders for f in (np.cos, np.sin)])
+
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """The harmonics for the exported estimator: $\\cos, \\sin$ of the order times the angle
+        (in double)."""
+        lines, cols = [], []
+        for j, k in enumerate(self.orders):
+            s, co = c.local(f"s{j}"), c.local(f"c{j}")
+            lines.append(c.sincos(f"{c.dnum(k)} * {c.angle(self.signal)}", s, co))
+            cols += [co, s]
+        return CSnippet(columns=tuple(cols), lines=tuple(lines))
 
 
 class KinematicHarmonics(AbstractPlantEffect):

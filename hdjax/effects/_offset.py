@@ -18,6 +18,7 @@ import numpy as np
 from .._custom_types import Array, Float, SamplesLike
 from .._features import Signals
 from ._base import AbstractColumnListTerm, AbstractFamily, Candidate, CandidateContext
+from ._c import AbstractCEmitter, CSnippet
 
 
 class Constant(AbstractColumnListTerm):
@@ -37,6 +38,10 @@ class Constant(AbstractColumnListTerm):
         self, sig: Signals, torque: SamplesLike | None = None
     ) -> Float[np.ndarray, "n 1"]:
         return np.ones((sig.n_samples, 1))
+
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """The constant's column for the exported estimator: 1 (eq. (10))."""
+        return CSnippet(columns=(c.num(1.0),))
 
 
 class OffsetFamily(AbstractFamily):

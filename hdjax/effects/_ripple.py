@@ -50,6 +50,7 @@ from ._base import (
     CandidateContext,
     both_sides,
 )
+from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, concrete, fmt, hyper
 
 MAX_RIPPLE = 0.5
@@ -88,6 +89,13 @@ class Ripple(AbstractLinearTorqueTerm):
     def numpy_torque_slope(self, sig: Signals) -> Float[np.ndarray, "n 2"]:
         th = self.order * np.asarray(sig.get(self.signal))
         return np.column_stack([np.sin(th), np.cos(th)]) / self.torque_scale
+
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """The torque slopes $(\\sin K\\theta, \\cos K\\theta)/\\tau_0$ for the exported
+        estimator."""
+        s, co, inv = c.local("s"), c.local("c"), c.num(1.0 / self.torque_scale)
+        arg = f"{c.dnum(self.order)} * {c.angle(self.signal)}"
+        return CSnippet(columns=(f"{s} * {inv}", f"{co} * {inv}"), lines=(c.sincos(arg, s, co),))
 
 
 class ComplianceRipple(AbstractPlantEffect):

@@ -46,6 +46,7 @@ from .._custom_types import Array, ArrayLike, Float, SamplesLike
 from .._errors import ConfigError
 from .._features import Signals
 from ._base import AbstractFamily, AbstractTorqueFreeTerm, Candidate, CandidateContext
+from ._c import AbstractCEmitter, CSnippet
 from ._fields import fmt, hyper, rounded
 
 BACK_SAMPLES = 16
@@ -134,6 +135,54 @@ class EncoderSkew(AbstractTorqueFreeTerm):
         self, sig: Signals, torque: SamplesLike | None = None
     ) -> Float[np.ndarray, "n 1"]:
         return self._column(sig, np)[:, None]
+
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """The column for the exported estimator: the last `BACK_SAMPLES` samples of the
+        encoder read earlier kept (double) in the state, and [`delayed`][]'s interpolation
+        over them, step for step (bounded: `BACK_SAMPLES` pairs per sample)."""
+        m = BACK_SAMPLES + 1
+        d = abs(float(self.delay))
+        x_now = (
+            c.angle("theta_l")
+            if self.delay > 0
+            else f"({c.angle('theta_m')} / {c.dnum(self.ratio)})"
+        )
+        ts = [c.state(f"t{j}") for j in range(m)]
+        xs = [c.state(f"x{j}") for j in range(m)]
+        tb, xb, xn, col = c.local("tb"), c.local("xb"), c.local("xnow"), c.local("col")
+        update = [f"const double {xn} = {x_now};", f"if ({c.first}) {{"]
+        update += [f"    {a} = {c.time()}; {b} = {xn};" for a, b in zip(ts, xs)]
+        update += ["} else {"]
+        update += [
+            f"    {ts[j]} = {ts[j - 1]}; {xs[j]} = {xs[j - 1]};" for j in range(m - 1, 0, -1)
+        ]
+        update += [f"    {ts[0]} = {c.time()}; {xs[0]} = {xn};", "}"]
+        update += [
+            f"const double {tb}[{m}] = {{{', '.join(ts)}}};",
+            f"const double {xb}[{m}] = {{{', '.join(xs)}}};",
+            f"const {c.real} {col} = ({c.real})({c.dnum(self.sign)} * ({xn} - "
+            f"hdjax_skew_delayed({tb}, {xb}, {c.time()} - {c.dnum(d)})) / {c.dnum(d)});",
+        ]
+        helper = f"""\
+static double hdjax_skew_delayed(const double *tb, const double *xb, double target)
+{{
+    /* hdjax.effects.delayed: x at the instant target, by linear interpolation between the
+       pairs of the last {m} samples (tb[0], xb[0] the present one) at or before it */
+    double out = xb[0], hi_t = tb[0], hi_x = xb[0];
+    int done = 0, j;
+    for (j = 1; j < {m}; ++j) {{
+        const double lo_t = tb[j], lo_x = xb[j];
+        const int edge = lo_t >= hi_t;
+        if (!done && !edge && lo_t <= target)
+            out = lo_x + (target - lo_t) / (hi_t - lo_t) * (hi_x - lo_x);
+        done = done || edge || lo_t <= target;
+        hi_t = lo_t;
+        hi_x = lo_x;
+    }}
+    return done ? out : hi_x;
+}}"""
+        state = tuple((f"t{j}", 0.0) for j in range(m)) + tuple((f"x{j}", 0.0) for j in range(m))
+        return CSnippet(columns=(col,), double_state=state, update=tuple(update), helpers=(helper,))
 
     def refined(self, coef: Float[np.ndarray, " 1"]) -> EncoderSkew | None:
         """The term at the fitted delay `coef[0]` [s], or `None` when that agrees with this

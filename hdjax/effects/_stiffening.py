@@ -16,6 +16,7 @@ import numpy as np
 
 from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut
 from ._base import AbstractMemorylessTerm, AbstractPlantEffect, AbstractTorqueScaleFamily
+from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, hyper, labels
 
 
@@ -34,6 +35,16 @@ class Stiffening(AbstractMemorylessTerm):
 
     def numpy_value(self, torque: Pointwise) -> Float[np.ndarray, "*shape"]:
         return (np.asarray(torque) / self.torque_scale) ** 3
+
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """$(T/\\tau_s)^3$ and its slope for the exported estimator's Newton steps (the powers
+        multiplied as JAX's `integer_pow` does)."""
+        s, u = c.num(self.torque_scale), c.local("u")
+        return CSnippet(
+            value=f"{u} * ({u} * {u})",
+            slope=f"{c.num(3.0)} * ({u} * {u}) / {s}",
+            lines=(f"const {c.real} {u} = {c.torque} / {s};",),
+        )
 
 
 class CubicSpring(AbstractPlantEffect):

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 
 from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, SamplesLike
 from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm, Candidate, CandidateContext
+from ._c import AbstractCEmitter, CSnippet
 from ._coulomb import Coulomb
 from ._fields import bound, hyper, labels
 from ._friction import friction_effects, velocity_candidates
@@ -51,6 +52,14 @@ class Stribeck(AbstractSignalTerm):
     def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         u = x / self.omega_st
         return xp.exp(-(u * u)) * xp.tanh(x / self.omega_s)
+
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """The Stribeck excess for the exported estimator."""
+        x, u = c.signal(self.signal), c.local("u")
+        return CSnippet(
+            columns=(f"{c.fn('exp')}(-({u} * {u})) * {c.fn('tanh')}({x} / {c.num(self.omega_s)})",),
+            lines=(f"const {c.real} {u} = {x} / {c.num(self.omega_st)};",),
+        )
 
 
 class StribeckFriction(AbstractFriction):

@@ -30,6 +30,7 @@ from ._base import (
     Candidate,
     CandidateContext,
 )
+from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, hyper, labels, rounded
 
 
@@ -50,6 +51,11 @@ class Column(AbstractSignalTerm):
     def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         return (x - self.center) / self.scale
 
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """The centred, scaled column for the exported estimator."""
+        x = c.signal(self.name)
+        return CSnippet(columns=(f"({x} - {c.num(self.center)}) / {c.num(self.scale)}",))
+
 
 class ColumnTimesTorque(AbstractLinearTorqueTerm):
     """An extra column times torque: a compliance that drifts with e.g. temperature,
@@ -68,6 +74,11 @@ class ColumnTimesTorque(AbstractLinearTorqueTerm):
 
     def numpy_torque_slope(self, sig: Signals) -> Float[np.ndarray, " n"]:
         return self._slope(np.asarray(sig.get(self.name)))
+
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """The torque slope $u(x)$ for the exported estimator."""
+        x, s = c.signal(self.name), c.num(self.scale * self.torque_scale)
+        return CSnippet(columns=(f"({x} - {c.num(self.center)}) / {s}",))
 
     def _slope(self, x):
         # the same arithmetic for JAX and NumPy arrays

@@ -18,6 +18,7 @@ import equinox as eqx
 
 from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, SamplesLike
 from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm, Candidate, CandidateContext
+from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, hyper, labels
 from ._friction import friction_effects, velocity_candidates
 
@@ -32,6 +33,10 @@ class Viscous(AbstractSignalTerm):
 
     def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
         return x / self.scale
+
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """The scaled velocity for the exported estimator."""
+        return CSnippet(columns=(f"{c.signal(self.signal)} / {c.num(self.scale)}",))
 
 
 class ViscousFriction(AbstractFriction):

@@ -27,6 +27,7 @@ from ._base import (
     CandidateContext,
     PlantEffect,
 )
+from ._c import AbstractCEmitter, CSnippet
 from ._fields import concrete, hyper
 
 
@@ -57,6 +58,16 @@ class CurrentPolynomial(AbstractColumnListTerm):
     def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         x = np.asarray(sig.current) / self.scale
         return np.column_stack([x ** (i + 1) for i in range(self.order)])
+
+    def c_code(self, c: AbstractCEmitter) -> CSnippet:
+        """Eq. (8)'s powers of the scaled current for the exported estimator, each the previous
+        one times $I/s$ (as `column_list` computes them)."""
+        powers = [c.local("p1")]
+        lines = [f"const {c.real} {powers[0]} = {c.signal('current')} / {c.num(self.scale)};"]
+        for i in range(2, self.order + 1):
+            powers.append(c.local(f"p{i}"))
+            lines.append(f"const {c.real} {powers[-1]} = {powers[-2]} * {powers[0]};")
+        return CSnippet(columns=tuple(powers), lines=tuple(lines))
 
 
 class WaveGenerator(AbstractPlantEffect):

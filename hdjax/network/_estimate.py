@@ -6,11 +6,13 @@ from .._custom_types import Array, Float
 from .._errors import ModelMismatchError
 from .._joint import Joint
 from .._recording import Recording
-from ._features import build_features
+from ._features import Features, build_features
 from ._mlp import Network, predict
 
 
-def predict_torque(network: Network, recording: Recording, joint: Joint) -> Float[Array, " n"]:
+def predict_torque(
+    network: Network, recording: Recording, joint: Joint, *, causal: bool = False
+) -> Float[Array, " n"]:
     """Predict the output torque of every sample of `recording` with a trained network.
 
     The input vector is built with the options the network was trained with (its stored
@@ -21,6 +23,8 @@ def predict_torque(network: Network, recording: Recording, joint: Joint) -> Floa
     - `network`: a trained [`hdjax.network.Network`][].
     - `recording`: the [`hdjax.Recording`][] to estimate on (no torque needed).
     - `joint`: the [`hdjax.Joint`][].
+    - `causal`: build every sample's input from that sample and earlier ones only (see
+      [`hdjax.network.build_features`][]), as `hdjax export`'s C code does.
 
     **Returns:** torque [N·m], shape `(n,)`.
     """
@@ -28,8 +32,20 @@ def predict_torque(network: Network, recording: Recording, joint: Joint) -> Floa
         raise ModelMismatchError(
             f"predict_torque needs an hdjax.network.Network, got {type(network).__name__}"
         )
+    return predict(network, network_features(network, recording, joint, causal=causal))
+
+
+def network_features(
+    network: Network, recording: Recording, joint: Joint, *, causal: bool = False
+) -> Features:
+    """The input vector of every sample, built with the options `network` was trained with
+    (its stored [`hdjax.network.FeatureLayout`][]; see [`hdjax.network.build_features`][])."""
     lay = network.layout
-    feats = build_features(
-        recording, joint, periodic=lay.periodic, orders=lay.orders or (1, 2), kalman=lay.kalman
+    return build_features(
+        recording,
+        joint,
+        periodic=lay.periodic,
+        orders=lay.orders or (1, 2),
+        kalman=lay.kalman,
+        causal=causal,
     )
-    return predict(network, feats)

@@ -93,6 +93,7 @@ def build_features(
     periodic: bool = False,
     orders: tuple[int, ...] = (1, 2),
     kalman: bool = False,
+    causal: bool = False,
 ) -> Features:
     r"""The network input vector for every sample of a recording (Song et al., after eq. (28)).
 
@@ -104,6 +105,8 @@ def build_features(
     - `orders`: harmonic orders $k$ when `periodic`.
     - `kalman`: Kalman-filter the current first ([`hdjax.network.filter_current`][] with the
       paper's variances, every sample handed on).
+    - `causal`: velocities from each sample and earlier ones only (the first sample at rest;
+      see [`hdjax.signals`][]), as `hdjax export`'s C code computes them.
 
     **Returns:** a [`hdjax.network.Features`][] with `x` of shape `(n, n_features)`.
     """
@@ -112,7 +115,7 @@ def build_features(
         raise DataError(f"{recording.source}: need at least 2 samples to build features")
     if kalman:
         recording = filter_current(recording, output_period=None)
-    sig = signals(recording, joint)
+    sig = signals(recording, joint, causal=causal)
     cols = {name: sig.get(name) for name in ("current", "omega_m", "omega_l", "twist")}
     if periodic:
         for angle in ("theta_m", "theta_l"):

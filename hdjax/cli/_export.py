@@ -1,0 +1,109 @@
+"""`hdjax export`: a saved model as dependency-free C code with a causal per-sample step.
+
+The result folder follows the rules of every command ([`hdjax.report.ResultDir`][]): it is
+checked before any work, filled in a staging folder and renamed into place only when complete,
+so a model that cannot be exported (a term without C code, a velocity that reads ahead) gets one
+line on stderr, exit code 2, and nothing written.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ._common import (
+    RESULT_OVERWRITE,
+    Progress,
+    add_command,
+    add_flag,
+    add_model_options,
+    add_quiet,
+    model_file,
+    read_column_map,
+)
+
+HELP = "export a saved model as C99 code with a per-sample step (no heap, libm only)"
+EXAMPLE = """\
+example:
+  hdjax export --model runs/song2019/model.json --out runs/song2019_c
+  hdjax export --model runs/song2019 --method network --precision single --out runs/net_c
+
+OUT holds hdjax_estimator.h and hdjax_estimator.c (call hdjax_init, then hdjax_step once per
+sample), README.md with the calling sequence, test_vectors.csv (inputs and the torque hdjax
+computes for them) and hdjax_check.c, which checks a build against the vectors:
+  cc -std=c99 -O2 hdjax_estimator.c hdjax_check.c -lm -o hdjax_check
+  ./hdjax_check test_vectors.csv
+The step uses the present sample and earlier ones only; it equals 'hdjax estimate --causal'.
+"""
+
+
+def add_parser(sub) -> None:
+    """Register `export` with the `hdjax` command's sub-parsers."""
+    p = add_command(sub, "export", HELP, EXAMPLE)
+    add_model_options(p, "export")
+    p.add_argument("--out", required=True, help="the folder to write the C code into")
+    p.add_argument(
+        "--precision",
+        choices=("double", "single"),
+        default="double",
+        help="the C type of the model's arithmetic: double (equals hdjax's estimate to "
+        "rounding) or single (float; angles, time and twist stay double)",
+    )
+    add_flag(
+        p,
+        "--causal",
+        'export the causal form of a velocity that reads ahead (velocity = "smoothed": the '
+        "line over the window ending at each sample), refused otherwise",
+    )
+    p.add_argument(
+        "--data",
+        help="a recording whose first --vectors samples become the test vectors (default: "
+        "samples that sweep the calibrated torque range)",
+    )
+    p.add_argument(
+        "--columns",
+        help="TOML file whose [data] table maps the --data file's columns (as for estimate)",
+    )
+    p.add_argument(
+        "--vectors", type=int, default=2000, help="samples in test_vectors.csv (default 2000)"
+    )
+    add_flag(p, "--overwrite", RESULT_OVERWRITE)
+    add_quiet(p)
+
+
+def command(args, parser) -> int:
+    """Run `hdjax export` (see the module docstring)."""
+    from .._errors import ConfigError
+    from .._formats import load_recording
+    from ..config import check_compatible, load_model
+    from ..export import export_files
+    from ..report import ResultDir
+
+    progress = Progress(args.quiet)
+    if args.columns and not args.data:
+        raise ConfigError("--columns maps the --data file's columns; give --data too")
+    if args.vectors < 2:
+        raise ConfigError(f"--vectors must be at least 2 samples, got {args.vectors}")
+    out = Path(args.out)
+    inputs = [Path(args.model), args.data, args.columns]
+    with ResultDir(out, overwrite=args.overwrite, inputs=inputs, command="export") as rd:
+        path = model_file(args.model)
+        saved = load_model(path)
+        recording = None
+        if args.data:
+            cmap = read_column_map(args.columns) if args.columns else None
+            recording = load_recording(args.data, cmap)
+            check_compatible(saved, recording)
+        progress(f"exporting the {args.method} of {path} ({args.precision} precision)")
+        files = export_files(
+            saved,
+            method=args.method,
+            precision=args.precision,
+            causal=args.causal,
+            recording=recording,
+            n_vectors=args.vectors,
+            source=str(path),
+        )
+        for name, data in files.items():
+            rd.write_bytes(name, data)
+    progress(f"wrote {out}")
+    return 0

@@ -1,0 +1,257 @@
+"""The exported C estimator equals the JAX estimate: compiled with the system compiler under
+`-std=c99 -Wall -Wextra -Werror -O2`, run on 10^5 samples through ctypes, compared with
+`estimate_torque(..., causal=True)` / `predict_torque(..., causal=True)`.
+
+Tolerances: double precision 1e-9 N·m (the C code repeats the JAX operations; what differs is
+XLA's fused multiply-adds and its own tanh/exp, a few ulp of twists of ~1e-3 rad over
+compliances of ~3e-5 rad/(N·m): ~1e-11 N·m measured); single precision 0.1 % of the rated
+torque (float's 6e-8 relative on the twist, ~2e-5 N·m measured), its largest error printed.
+Models: the paper's per-segment and shared layouts (eqs. (7)-(10), coefficients from
+`tests/helpers.py`), one with a term of every effect family, one with the causal smoothed
+velocity, and the network with Kalman-filtered current, raw and periodic angles. Seeds fixed.
+"""
+
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import hdjax
+from hdjax import effects as fx, export, network as nw
+from hdjax.compliance import ComplianceModel, estimate_torque
+
+from .helpers import JOINT, sim_recording, true_coefficients
+
+N = 100_000
+
+
+@pytest.fixture(scope="session")
+def compiler():
+    cc = export.find_compiler()
+    if cc is None:
+        pytest.skip("no C compiler (cc, gcc or clang) on PATH: the C export is not checked here")
+    return cc
+
+
+def _with_truth(model: ComplianceModel, seed: int, effect_scale: float = 0.1) -> ComplianceModel:
+    coef = true_coefficients(model, seed=seed)
+    coef[model.n_coef - model.n_effect :] *= effect_scale  # effects a tenth of the base terms
+    return eqx.tree_at(lambda m: m.coef, model, jnp.asarray(coef))
+
+
+def every_effect_model() -> ComplianceModel:
+    """The shared paper model with a term of every effect family the residual loop adds."""
+    base = ComplianceModel.paper(JOINT, per_segment=False, poly_order=3, fourier_order=2)
+    terms = (
+        fx.Harmonics("theta_m", (2.0,)),
+        fx.Harmonics("theta_l", (1.0, 3.0)),
+        fx.Coulomb("omega_m", 0.5),
+        fx.Coulomb("omega_l", 0.05),
+        fx.Viscous("omega_l", 1.0),
+        fx.Stribeck("omega_m", 0.5, 1.5),
+        fx.TwistHysteresis(2.0, 3e-5),
+        fx.Hysteresis(3.0),
+        fx.Backlash(2.0),
+        fx.Stiffening(90.0),
+        fx.Ripple("theta_m", 2.0, 90.0),
+        fx.TwistRate(101.0, 1.0, 0.01),
+        fx.Column("temperature", 25.0, 1.0),
+        fx.ColumnTimesTorque("temperature", 25.0, 1.0, 90.0),
+        fx.EncoderSkew(delay=1.5e-3, ratio=160.0),
+        fx.EncoderSkew(delay=-0.4e-3, ratio=160.0, sign=-1.0),
+    )
+    return _with_truth(base.with_effects(*terms), seed=3)
+
+
+MODELS = {
+    "paper_per_segment": lambda: _with_truth(ComplianceModel.paper(JOINT), seed=1),
+    "paper_shared": lambda: _with_truth(ComplianceModel.paper(JOINT, per_segment=False), seed=2),
+    "every_effect": every_effect_model,
+    "smoothed_causal": lambda: _with_truth(
+        ComplianceModel.paper(JOINT, per_segment=False, velocity="smoothed").with_effects(
+            fx.Coulomb("omega_l", 0.05), fx.TwistRate(101.0, 1.0, 0.01)
+        ),
+        seed=4,
+    ),
+}
+
+
+@dataclasses.dataclass
+class Case:
+    recording: hdjax.Recording
+    torque: np.ndarray  # the JAX estimate with causal=True
+    flags: np.ndarray
+    kw: dict
+
+
+@pytest.fixture(scope="module")
+def model_cases():
+    out = {}
+    for name, make in MODELS.items():
+        model = make()
+        rec = export.synthetic_recording(JOINT, N, model=model, extras=("temperature",))
+        torque, flags = export.expected(rec, JOINT, model=model)
+        out[name] = Case(rec, torque, flags, {"model": model})
+    return out
+
+
+def _network(periodic: bool) -> nw.Network:
+    lay = nw.make_layout(periodic=periodic, kalman=True)
+    net = nw.Network(lay, (20,), key=jax.random.key(0))
+    train = sim_recording(4000, seed=5)
+    feats = nw.build_features(train, JOINT, periodic=periodic, kalman=True)
+    return nw.standardise(net, feats.x, train.torque)
+
+
+@pytest.fixture(scope="module")
+def network_cases():
+    out = {}
+    for periodic in (False, True):
+        net = _network(periodic)
+        rec = export.synthetic_recording(JOINT, N, network=net)
+        torque, flags = export.expected(rec, JOINT, network=net)
+        out[periodic] = Case(rec, torque, flags, {"network": net})
+    return out
+
+
+def _c_code(case: Case, precision: str):
+    if "model" in case.kw:
+        model = case.kw["model"]
+        return export.compliance_c(
+            model, precision=precision, causal=model.velocity != "difference"
+        )
+    return export.network_c(case.kw["network"], JOINT, precision=precision)
+
+
+def _run(case: Case, precision: str, tmp_path, compiler):
+    lib = export.build_library(_c_code(case, precision), tmp_path)
+    return lib.run(case.recording)
+
+
+NETWORKS = {"network_raw_angles": False, "network_periodic_angles": True}
+
+
+@pytest.mark.parametrize("name", list(MODELS) + list(NETWORKS))
+@pytest.mark.parametrize("precision", ["double", "single"])
+def test_c_equals_the_causal_jax_estimate(
+    name, precision, model_cases, network_cases, tmp_path, compiler
+):
+    case = network_cases[NETWORKS[name]] if name in NETWORKS else model_cases[name]
+    torque, flags = _run(case, precision, tmp_path, compiler)
+    err = np.abs(torque - case.torque)
+    print(f"{name}: {precision}, {N} samples, max |C - JAX| = {err.max():.3g} N·m")
+    if precision == "double":
+        assert err.max() <= 1e-9, (name, err.max(), int(err.argmax()))
+        np.testing.assert_array_equal(flags, case.flags)
+    else:
+        print(f"  = {100 * err.max() / JOINT.rated_torque:.2e} % of the rated torque")
+        assert err.max() <= 1e-3 * JOINT.rated_torque, (name, err.max())
+    if name in MODELS:  # the recording sweeps the segments, some samples out of range
+        assert np.ptp(case.torque) > 1.5 * JOINT.rated_torque
+
+
+def test_causal_estimate_differs_from_the_recording_estimate_only_at_its_first_sample(
+    model_cases,
+):
+    # velocity = "difference": only the first sample's velocity (the second's, or at rest)
+    model = model_cases["paper_per_segment"].kw["model"]
+    r = model_cases["paper_per_segment"].recording
+    # angles away from 0 at the start, so that the kinematic terms read the first velocity
+    rec = hdjax.make_recording(r.t, r.theta_m + 5.0, r.theta_l + 0.05, r.current)
+    whole = np.asarray(estimate_torque(model, rec).torque)
+    causal = np.asarray(estimate_torque(model, rec, causal=True).torque)
+    assert whole[0] != causal[0]
+    np.testing.assert_array_equal(whole[1:], causal[1:])
+
+
+def test_smoothed_velocity_needs_its_causal_form(model_cases):
+    model = model_cases["smoothed_causal"].kw["model"]
+    with pytest.raises(hdjax.ExportError, match=r'velocity = "smoothed".*reads 5 samples ahead'):
+        export.compliance_c(model)
+    code = export.compliance_c(model, causal=True)
+    assert "11 samples up to and including each one" in code.notes[0]
+    # the causal velocity line is the centred one of 5 samples earlier (a pure delay)
+    t = np.arange(200) * 1e-3
+    theta = np.sin(3.0 * t) + 0.2 * t**2
+    causal = np.asarray(hdjax.smoothed_velocity(t, theta, 5, causal=True))
+    centred = np.asarray(hdjax.smoothed_velocity(t, theta, 5))
+    np.testing.assert_allclose(causal[15:], centred[10:-5], rtol=0, atol=1e-12)
+    assert causal[0] == 0.0
+
+
+def test_every_registered_term_has_c_code():
+    missing = [
+        f"{family.name}: {cls.__name__}"
+        for family in fx.families()
+        for cls in family.terms
+        if not export.has_c_code(cls)
+    ]
+    assert not missing, f"effect terms without c_code (hdjax export refuses them): {missing}"
+
+
+class NoCTerm(fx.AbstractSignalTerm):
+    """A term of a user's family without C code."""
+
+    signal: str = eqx.field(default="omega_m", static=True)
+
+    key, names = fx.labels("noc:{signal}", "noc({signal})")
+
+    def transform(self, x, xp):
+        return x * x
+
+
+def test_a_term_without_c_code_is_refused_with_its_name_and_family():
+    model = _with_truth(ComplianceModel.paper(JOINT, per_segment=False).with_effects(NoCTerm()), 5)
+    with pytest.raises(hdjax.ExportError, match=r"NoCTerm \(noc:omega_m.*has no C code"):
+        export.compliance_c(model)
+
+
+def test_a_hysteresis_state_from_the_first_motion_is_refused_as_noncausal():
+    model = _with_truth(
+        ComplianceModel.paper(JOINT, per_segment=False).with_effects(
+            fx.TwistHysteresis(2.0, 3e-5, initial=-1.0)
+        ),
+        7,
+    )
+    with pytest.raises(hdjax.ExportError, match=r"TwistHysteresis.*first motion.*initial = 0"):
+        export.compliance_c(model)
+
+
+def test_a_term_reading_a_private_signal_is_refused():
+    model = _with_truth(
+        ComplianceModel.paper(JOINT, per_segment=False).with_effects(
+            fx.Column("_torque_path", 0.0, 1.0)
+        ),
+        6,
+    )
+    with pytest.raises(hdjax.ExportError, match="'_torque_path'.*does not measure"):
+        export.compliance_c(model)
+
+
+def test_the_check_program_passes_its_vectors_and_fails_a_wrong_one(tmp_path, compiler):
+    import subprocess
+
+    from hdjax.config import SavedModel
+
+    model = MODELS["every_effect"]()
+    saved = SavedModel(JOINT, model, None, {}, {})
+    files = export.export_files(saved, n_vectors=500)
+    assert set(files) == set(export.FILES)
+    for name, data in files.items():
+        (tmp_path / name).write_bytes(data)
+    export.compile_c(tmp_path, ["hdjax_estimator.c", "hdjax_check.c"], "hdjax_check")
+    run = lambda csv: subprocess.run(  # noqa: E731
+        [str(tmp_path / "hdjax_check"), csv], capture_output=True, text=True, cwd=tmp_path
+    )
+    done = run("test_vectors.csv")
+    assert done.returncode == 0 and "500 samples" in done.stdout and "PASS" in done.stdout
+    lines = (tmp_path / "test_vectors.csv").read_text().splitlines()
+    cells = lines[300].split(",")
+    cells[-2] = repr(float(cells[-2]) + 1e-6)  # one expected torque off by 1e-6 N·m
+    lines[300] = ",".join(cells)
+    (tmp_path / "wrong.csv").write_text("\n".join(lines) + "\n")
+    done = run("wrong.csv")
+    assert done.returncode == 1 and "FAIL" in done.stdout and "(sample 299)" in done.stdout
