@@ -592,11 +592,12 @@ def _twist_per_speed(model: ComplianceModel, key: str) -> float:
     return float("nan")
 
 
-def _velocity_reading(best, trials, data: PipelineData, notes: list[str]):
+def _velocity_reading(best, trials, data: PipelineData, notes: list[str], try_key=None):
     """When the chosen trial is a speed term ([`VELOCITY_KEYS`][]), which reading the data
     supports ([`hdjax.effects.velocity_reading`][]): its twist per speed, over the data's
     compliance, against the current's own viscous slope. The chosen trial is swapped for the
-    other reading's, when that was tried too, and the sentence is noted either way."""
+    other reading's (tried now through `try_key(key)` when it was not among the trials), and
+    the sentence is noted either way."""
     key = best[1].key
     if key not in VELOCITY_KEYS:
         return best
@@ -615,6 +616,8 @@ def _velocity_reading(best, trials, data: PipelineData, notes: list[str]):
     want = "skew:encoders" if sentence.startswith("skew") else "viscous:omega_l"
     if slope is not None and key != want:
         other = [t for t in trials if t[1].key == want]
+        if not other and try_key is not None:
+            other = [t for t in [try_key(want)] if t is not None]
         if other:
             notes.append(f"{want} chosen over {key}, which fits the same speed column: {sentence}")
             return other[0]
@@ -833,7 +836,24 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
             )
             break
         best = _parsimonious(trials, cv, blocks_rec, options, notes)
-        best = _velocity_reading(best, trials, data, notes)
+
+        def _try_key(key, ranked=ranked):
+            # the reading's own candidate, when the shortlist did not try it
+            for *_, stab, members in (r for r in ranked if r[0].key == key):
+                gain, cand, folds_ = members[0]
+                try:
+                    new_model, new_est = calibrate(
+                        model.with_effects(cand.term), data, notes, est_train, options.chunk
+                    )
+                    new_cv = cross_validate(new_model, data, folds_rec, cv, options.chunk)
+                except (CalibrationError, InversionError):
+                    return None
+                if not new_cv.torque_rms <= (1.0 - options.min_torque_gain) * cv.torque_rms:
+                    return None  # it must pass the test the chosen trial passed
+                return (new_cv.torque_rms, cand, gain, folds_, stab, new_model, new_est, new_cv)
+            return None
+
+        best = _velocity_reading(best, trials, data, notes, _try_key)
         _, cand, gain, folds_, stab, new_model, new_est, new_cv = best
         with phase("aliases"):
             # on the signals the candidates were scored on (the model before this step)

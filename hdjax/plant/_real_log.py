@@ -240,6 +240,7 @@ def real_log(
         theta_l=jnp.asarray(theta_l),
         current=jnp.asarray(current),
         torque=jnp.asarray(torque),
+        extras={},
         source=source,
     )
     if not with_truth:

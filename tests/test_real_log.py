@@ -1,0 +1,79 @@
+"""The residual loop on what real logs bring: the real-log plant, an encoder skew found as a
+delay, and clean joints with white encoder noise that get no effect.
+
+Small versions of `benchmarks/real_log_cases.py` and `benchmarks/discover_noise.py` (which run
+the many-draw statistics): one skew draw, four noisy clean joints.
+"""
+
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+import hdjax
+from hdjax import plant
+from hdjax.discover import DiscoverOptions, discover, refit_structure
+from hdjax.effects import EncoderSkew
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+JOINT = hdjax.Joint(ratio=160, rated_torque=400)
+
+pytestmark = pytest.mark.slow
+
+
+def _logs(skew):
+    params = plant.song_params(defaults=False, effects={"wg_compliance": True})
+    sensors = plant.RealLogSensors(skew=skew, offset_seed=5)
+    k1, k2 = jax.random.split(jax.random.key(3))
+    train = plant.simulate_real_log(params, sensors, key=k1, sweeps=((-1.2, 1.2),), speed=0.4)
+    test = plant.simulate_real_log(params, sensors, key=k2, sweeps=((-1.0, 1.1),), speed=0.3)
+    return train, test
+
+
+def test_real_log_keeps_the_joints_offsets_and_no_truth_in_the_recording():
+    params = plant.song_params(defaults=False)
+    sensors = plant.RealLogSensors(offset_seed=9)
+    a, truth = plant.simulate_real_log(
+        params, sensors, key=jax.random.key(0), sweeps=((-0.2, 0.2),), with_truth=True
+    )
+    b = plant.simulate_real_log(params, sensors, key=jax.random.key(1), sweeps=((-0.2, 0.2),))
+    assert not a.extras and not b.extras
+    # the same joint: the load encoder's offset (the twist at rest, the first samples) agrees
+    # to the noise, where another joint's offset differs by a large part of a revolution
+    tw = lambda r: float(np.median(np.asarray(hdjax.twist(r.theta_m, r.theta_l, 160, 1.0))[:50]))
+    other = plant.simulate_real_log(
+        params, plant.RealLogSensors(offset_seed=10), key=jax.random.key(1), sweeps=((-0.2, 0.2),)
+    )
+    assert abs(tw(a) - tw(b)) < 1e-4
+    assert abs(tw(a) - tw(other)) > 1e-3
+    assert set(truth) >= {"true_theta_l", "true_torque"}
+    assert truth["true_torque"].shape == (a.n_samples,)
+
+
+@pytest.mark.parametrize("skew_ms", [-0.49])
+def test_an_encoder_skew_is_found_as_its_delay(skew_ms):
+    train, test = _logs(skew_ms * 1e-3)
+    res = discover(train, test, JOINT, DiscoverOptions(max_effects=2))
+    r = res.aux
+    assert "skew:encoders" in r.effects, r.effects
+    delay = [s.amplitude["delay_ms"] for s in r.steps if s.key == "skew:encoders"][0]
+    assert abs(delay - skew_ms) <= 0.1 * abs(skew_ms), delay
+    true = refit_structure(train, test, JOINT, [EncoderSkew(delay=skew_ms * 1e-3, ratio=160.0)])
+    assert r.final.rms <= 1.5 * true.rms, (r.final.rms, true.rms)
+    assert any("skew" in n for n in r.notes), r.notes
+
+
+def test_clean_joints_with_white_encoder_noise_get_no_effect():
+    from discover_noise import noisy_joint, split
+
+    rng = np.random.default_rng([21, 0])
+    added = []
+    for i in range(4):
+        rec, drawn = noisy_joint(rng, i, harmonic=False, duration=6.0)
+        train, test = split(rec)
+        added.append(discover(train, test, JOINT, DiscoverOptions(max_effects=3)).aux.effects)
+    print("effects added per noisy clean joint:", added)
+    assert sum(bool(a) for a in added) <= 1, added
