@@ -138,7 +138,7 @@ class EncoderSkew(AbstractTorqueFreeTerm):
 
     def c_code(self, c: AbstractCEmitter) -> CSnippet:
         """The column for the exported estimator: the last `BACK_SAMPLES` samples of the
-        encoder read earlier kept (double) in the state, and [`delayed`][]'s interpolation
+        encoder read earlier kept (double) in the state, and the interpolation of `delayed`
         over them, step for step (bounded: `BACK_SAMPLES` pairs per sample)."""
         m = BACK_SAMPLES + 1
         d = abs(float(self.delay))
@@ -166,7 +166,7 @@ class EncoderSkew(AbstractTorqueFreeTerm):
         helper = f"""\
 static double hdjax_skew_delayed(const double *tb, const double *xb, double target)
 {{
-    /* hdjax.effects.delayed: x at the instant target, by linear interpolation between the
+    /* delayed() of the skew family: x at the instant target, by linear interpolation between the
        pairs of the last {m} samples (tb[0], xb[0] the present one) at or before it */
     double out = xb[0], hi_t = tb[0], hi_x = xb[0];
     int done = 0, j;
