@@ -6,6 +6,7 @@ import re
 import sys
 import warnings
 
+import numpy as np
 import pytest
 
 from .conftest import REPO
@@ -106,6 +107,23 @@ def test_getting_started_python_runs_as_written(monkeypatch):
     assert result.aux.effects[0].startswith("harmonic:theta_m:2")
     assert result.stats["final_test_rms"] < 0.5 * result.stats["baseline_test_rms"]
     assert namespace["est"].torque.shape == namespace["test"].torque.shape
+
+
+def test_worked_example_test_log_is_another_recording():
+    # TEST is another motion and load path than TRAIN (not the same motion with a new noise
+    # draw): its encoder counts differ from TRAIN's (the two swings cross, so a row may agree
+    # by chance: at most 1 %), its output angle spans less, and its torque stays inside the
+    # range TRAIN calibrates
+    logs = {
+        name: np.loadtxt(DOCS / "examples" / f"bench_{name}.csv", delimiter=",", skiprows=1)
+        for name in ("train", "test")
+    }
+    train, test = logs["train"], logs["test"]
+    assert train.shape == test.shape
+    for col in (1, 2):  # motor_counts, output_counts
+        assert np.mean(train[:, col] == test[:, col]) <= 0.01
+    assert np.ptp(test[:, 2]) < 0.9 * np.ptp(train[:, 2])
+    assert train[:, 4].min() < test[:, 4].min() and test[:, 4].max() < train[:, 4].max()
 
 
 def test_getting_started_commands_run_as_written(monkeypatch, tmp_path):

@@ -1,5 +1,6 @@
 """The real LARA8 log (joint 3) through experiments/lara8_joint3.toml's column map."""
 
+import csv
 import tomllib
 import warnings
 
@@ -29,7 +30,13 @@ def lara8(lara8_dir):
     return doc, joint, rec
 
 
-def test_config_loads_and_describes_the_joint(lara8):
+def _raw_column(lara8_dir, name):
+    """One column of the raw log, read with the csv module (not through hdjax)."""
+    with open(lara8_dir / "validate.csv", newline="") as f:
+        return np.array([float(row[name]) for row in csv.DictReader(f)])
+
+
+def test_config_loads_and_describes_the_joint(lara8, lara8_dir):
     doc, joint, rec = lara8
     assert joint.ratio == 101 and joint.twist_sign == -1
     assert joint.encoder_bits_motor == joint.encoder_bits_load == 24
@@ -38,8 +45,13 @@ def test_config_loads_and_describes_the_joint(lara8):
     np.testing.assert_array_equal(np.asarray(rec.current), np.asarray(rec.torque))
     assert doc["model"]["poly_order"] == 0  # current == reference torque: no polynomial
     # 2^24 counts per revolution: the output turns ~0.83 rev, the motor ~84 rev (ratio 101)
+    # (independent: the raw counts' span read with the csv module, times 2 pi / 2^24; the map's
+    # offset = "first" shifts the angle, which leaves the span as it is)
     span_l, span_m = float(np.ptp(rec.theta_l)), float(np.ptp(rec.theta_m))
-    assert span_l == pytest.approx(5.2007, abs=1e-3)
+    counts = {n: _raw_column(lara8_dir, f"encoder_{n}inc_3") for n in ("load", "motor")}
+    assert span_l == pytest.approx(np.ptp(counts["load"]) * 2 * np.pi / 2**24, rel=1e-12)
+    assert span_m == pytest.approx(np.ptp(counts["motor"]) * 2 * np.pi / 2**24, rel=1e-12)
+    assert 0.8 < span_l / (2 * np.pi) < 0.9  # ~0.83 rev
     assert span_m / span_l == pytest.approx(101, rel=0.01)
 
 
@@ -58,7 +70,7 @@ def test_twist_is_plausible(lara8):
     np.testing.assert_array_equal(flipped, -raw)
 
 
-def test_shared_calibration_reports_the_unreached_segment(lara8):
+def test_shared_calibration_reports_the_unreached_segment(lara8, lara8_dir):
     _, joint, rec = lara8
     # the paper's five segments, no current polynomial (current == reference), kinematic error
     # as harmonics 1, 2 of the motor angle and 1 of the output angle, shared coefficients. (A
@@ -84,8 +96,12 @@ def test_shared_calibration_reports_the_unreached_segment(lara8):
     print("segment compliances [arcsec/N·m]", k_arcsec, "residual",
           res.stats["residual_rms"] * ARCSEC)  # fmt: skip
     assert np.all(k_arcsec > 0)  # invertible with twist_sign = -1
+    # every sample lies in the calibrated segments 1-4 (none below -100 N·m), so the torque
+    # range is the whole log's: its extremes in the raw column, read with the csv module
+    raw = _raw_column(lara8_dir, "joint_torque_current_3")
+    assert raw.min() > -100.0
     lo, hi = res.value.torque_range
-    assert lo == pytest.approx(float(rec.torque.min())) and hi == pytest.approx(122.705)
+    assert lo == pytest.approx(raw.min(), rel=1e-12) and hi == pytest.approx(raw.max(), rel=1e-12)
     est = estimate_torque(res.value, rec)
     err = hdjax.error_metrics(est.torque, rec.torque, joint.rated_torque)
     print("in-sample", err.as_dict())

@@ -2,6 +2,7 @@
 the [data.reference] table."""
 
 import math
+import re
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -20,6 +21,7 @@ from hdjax.reference import (
     jacobians,
     link_transform,
     offset_from_rest,
+    rpy_matrix,
     tool_rotations,
 )
 
@@ -27,6 +29,8 @@ SEED = 20261201
 
 
 def _random_arm(rng, convention):
+    """A random 6-joint arm and its tool mount `(xyz, rpy)`, the angles as drawn."""
+    tool = rng.uniform(-0.2, 0.2, 3), rng.uniform(-np.pi, np.pi, 3)
     links = np.column_stack(
         [
             rng.uniform(-0.5, 0.5, 6),
@@ -35,12 +39,7 @@ def _random_arm(rng, convention):
             rng.uniform(-np.pi, np.pi, 6),
         ]
     )
-    return dh_arm(
-        links,
-        convention=convention,
-        tool_xyz=rng.uniform(-0.2, 0.2, 3),
-        tool_rpy=rng.uniform(-np.pi, np.pi, 3),
-    )
+    return dh_arm(links, convention=convention, tool_xyz=tool[0], tool_rpy=tool[1]), tool
 
 
 @pytest.mark.parametrize("convention", ["standard", "modified"])
@@ -51,7 +50,7 @@ def test_jacobian_matches_finite_differences_of_the_forward_kinematics(conventio
     h = 1e-6
     fk = eqx.filter_jit(lambda arm, x: forward_kinematics(arm, x)[1])
     for _ in range(5):
-        arm = _random_arm(rng, convention)
+        arm, _ = _random_arm(rng, convention)
         q = rng.uniform(-np.pi, np.pi, 6)
         pose = lambda x: np.asarray(fk(arm, jnp.asarray(x)))
         t0 = pose(q)
@@ -95,6 +94,33 @@ def test_link_transform_conventions_closed_form():
     np.testing.assert_allclose(got, mod, atol=1e-15)
 
 
+def test_rpy_matrix_is_yaw_pitch_roll_by_hand():
+    # URDF rpy: R = Rz(yaw) Ry(pitch) Rx(roll), each about the fixed base axes. By hand, roll
+    # 90 deg then pitch 90 deg: Rx(90) takes y to z and z to -y, Ry(90) then takes z to -x and
+    # x to z, so the frame's axes x, y, z point along base -z, x, -y. The other order (Rx Ry Rz)
+    # puts them along base y, z, x, so this catches a swapped product.
+    np.testing.assert_allclose(
+        rpy_matrix(math.pi / 2, math.pi / 2, 0.0),
+        [[0, 1, 0], [0, 0, -1], [-1, 0, 0]],
+        atol=1e-15,
+    )
+    # yaw 90 deg then (applied first) roll 90 deg: x, y, z along base y, z, x
+    np.testing.assert_allclose(
+        rpy_matrix(math.pi / 2, 0.0, math.pi / 2),
+        [[0, 0, 1], [1, 0, 0], [0, 1, 0]],
+        atol=1e-15,
+    )
+    # generic angles: the product Rz Ry Rx written out element by element
+    r, p, y = 0.3, -1.1, 2.4
+    cr, sr, cp, sp, cy, sy = (f(v) for v in (r, p, y) for f in (math.cos, math.sin))
+    closed = [
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ]
+    np.testing.assert_allclose(rpy_matrix(r, p, y), closed, atol=1e-15)
+
+
 # ---------------------------------------------------------------------------------------------
 # URDF through pinocchio
 
@@ -109,13 +135,19 @@ def _rpy(r: np.ndarray) -> tuple[float, float, float]:
 
 
 def _origin(t: np.ndarray) -> str:
-    xyz = " ".join(f"{v:.17g}" for v in t[:3, 3])
-    rpy = " ".join(f"{v:.17g}" for v in _rpy(t[:3, :3]))
+    return _origin_of(t[:3, 3], _rpy(t[:3, :3]))
+
+
+def _origin_of(xyz, rpy) -> str:
+    xyz, rpy = (" ".join(f"{float(v):.17g}" for v in x) for x in (xyz, rpy))
     return f'<origin xyz="{xyz}" rpy="{rpy}"/>'
 
 
-def _urdf_of(arm, masses=None) -> str:
-    """A URDF with the same kinematics as a DH arm: T_i(q) = A_i Rz(q) B_i."""
+def _urdf_of(arm, masses=None, tool=((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))) -> str:
+    """A URDF with the same kinematics as a DH arm: T_i(q) = A_i Rz(q) B_i.
+
+    The sensor mount is written from its angles `tool = (xyz, rpy)` as the arm was built from,
+    not from `arm.tool`, so pinocchio's reading of URDF rpy checks hdjax's `rpy_matrix`."""
     modified = arm.convention == "modified"
     eye = np.eye(4)
     a_, b_ = [], []
@@ -145,11 +177,13 @@ def _urdf_of(arm, masses=None) -> str:
             '<limit lower="-10" upper="10" effort="1" velocity="1"/></joint>',
         ]
         prev = f"l{i}"
-    tool = b_[-1] @ np.asarray(arm.tool)
     parts += [
+        '<link name="flange"/>',
+        f'<joint name="flange" type="fixed"><parent link="{prev}"/><child link="flange"/>'
+        f"{_origin(b_[-1])}</joint>",
         '<link name="sensor"/>',
-        f'<joint name="mount" type="fixed"><parent link="{prev}"/><child link="sensor"/>'
-        f"{_origin(tool)}</joint>",
+        '<joint name="mount" type="fixed"><parent link="flange"/><child link="sensor"/>'
+        f"{_origin_of(*tool)}</joint>",
         "</robot>",
     ]
     return "\n".join(parts)
@@ -158,12 +192,13 @@ def _urdf_of(arm, masses=None) -> str:
 @pytest.mark.parametrize("convention", ["standard", "modified"])
 def test_jacobian_matches_pinocchio_on_a_urdf(tmp_path, convention):
     # Independent computation: pinocchio's frame Jacobian (LOCAL / LOCAL_WORLD_ALIGNED) on a
-    # URDF written from the same table; both are exact, so agreement to 1e-10.
+    # URDF written from the same table and the tool mount's own angles (not from arm.tool, so
+    # a wrong rotation order in rpy_matrix shows); both are exact, so agreement to 1e-10.
     pytest.importorskip("pinocchio")
     rng = np.random.default_rng(SEED + 1)
-    arm = _random_arm(rng, convention)
+    arm, tool = _random_arm(rng, convention)
     path = tmp_path / "arm.urdf"
-    path.write_text(_urdf_of(arm))
+    path.write_text(_urdf_of(arm, tool=tool))
     urdf = UrdfArm(path, "sensor")
     q = rng.uniform(-np.pi, np.pi, (4, 6))
     for frame in ("tool", "base"):
@@ -394,7 +429,13 @@ def test_offset_fit_recovers_the_offset_and_the_payload(tmp_path):
             se = off.stderr
             bound = 0.075 + 5 * (0.5 * np.hypot(se[0], se[1]) + se[5])
             assert np.sqrt(np.mean(err**2)) < bound
-        assert "payload of -2.5" in off.describe() or seed  # reported with the fitted numbers
+        # reported with the fitted numbers, on every seed: the mass to the 3 digits shown
+        # (half a unit of the 3rd digit: 0.005 kg here) and near the truth
+        shown = re.search(r"payload of (\S+) kg at \[(.*?)\] mm", off.describe())
+        assert shown, off.describe()
+        assert abs(float(shown[1]) - off.mass) <= 0.005 and abs(float(shown[1]) + 2.5) < 0.2
+        com = [float(v) for v in shown[2].split(", ")]
+        np.testing.assert_allclose(com, 1e3 * np.asarray(off.com), atol=0.05)  # mm, 1 decimal
     # a single pose cannot separate offset and payload: refused
     rot = np.repeat(np.eye(3)[None], 20, axis=0)
     with pytest.raises(hdjax.CalibrationError, match="confounded"):

@@ -4,8 +4,15 @@ layout of its own (raw encoder counts, other column names), as a user's bench wo
     python docs/examples/make_example.py
 
 The joint is the built-in plant (ratio 160, rated torque 400 N·m) with one effect the paper's
-model lacks: a kinematic error of order 2 in the motor angle (0.3 arcmin). `slow` experiment,
-30 s sampled every 4 ms; TRAIN and TEST come from different seeds.
+model lacks: a kinematic error of order 2 in the motor angle (0.3 arcmin). Both logs are 30 s
+sampled every 4 ms, of the same joint under weights on its link, but two recordings of two
+motions and load paths (each with its own sensor noise seed):
+
+- TRAIN: the `slow` experiment, a swing of +-1.4 rad (80 deg) with a period of 20 s, the arm
+  holding the weights lengthened from 0.5 to 0.75 of its longest at 20 s;
+- TEST: a smaller, quicker swing, +-1.1 rad with a period of 16 s, the arm lengthened at 16 s,
+  so the angles, speeds and the torque's path differ from TRAIN's at every sample, while the
+  torque stays inside the range TRAIN calibrates.
 """
 
 from __future__ import annotations
@@ -27,11 +34,20 @@ EFFECTS = {
 }
 
 
-def write_log(path: Path, seed: int) -> None:
+DT = 5e-4  # integration step [s]
+DURATION = 30.5  # [s], of which the first 0.5 s (the start from rest) is left out
+SWINGS = {"train": (1.4, 20.0), "test": (1.1, 16.0)}  # amplitude [rad], period [s]
+
+
+def write_log(path: Path, seed: int, swing: tuple[float, float]) -> None:
+    """Simulate the joint over one swing `(amplitude, period)` and write its log to `path`."""
     params = plant.song_params(defaults=False, effects=EFFECTS)
-    rec = plant.simulate_scenario(
-        "slow", key=jax.random.PRNGKey(seed), duration=30.5, params=params, output_period=4e-3
-    )
+    amplitude, period = swing
+    drive = plant.swing_drive(params, amplitude=amplitude, period=period, duration=DURATION, dt=DT)
+    # the sensor-noise key as `simulate_scenario` derives it, so TRAIN is the `slow` scenario's
+    # recording with this seed
+    key = jax.random.fold_in(jax.random.PRNGKey(seed), 1)
+    rec = plant.simulate(params, drive, key=key, dt=DT, output_period=4e-3)
     keep = np.asarray(rec.t) >= 0.5  # leave out the start from rest
     t = np.asarray(rec.t)[keep] - 0.5
     motor = np.round(np.asarray(rec.theta_m)[keep] / (2 * math.pi) * COUNTS).astype(np.int64)
@@ -45,5 +61,5 @@ def write_log(path: Path, seed: int) -> None:
 
 
 if __name__ == "__main__":
-    write_log(HERE / "bench_train.csv", seed=11)
-    write_log(HERE / "bench_test.csv", seed=12)
+    write_log(HERE / "bench_train.csv", seed=11, swing=SWINGS["train"])
+    write_log(HERE / "bench_test.csv", seed=12, swing=SWINGS["test"])
