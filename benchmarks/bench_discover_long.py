@@ -15,7 +15,11 @@ that run's wall, CPU and peak resident memory and its precision: the largest rel
 difference of the final model's coefficients and of the reported errors (TEST and
 cross-validated) from the in-memory run, and whether the effects found are the same.
 
-    python benchmarks/bench_discover_long.py [--samples 1000000] [--chunk 16384]
+With `--scale N1,N2,...` (default 100000,300000) both runs are repeated on N1, N2, ...
+TRAIN samples, and `scale` lists the wall time and peak resident memory of each size (the
+main run's size last): the benchmarks page plots them against the samples.
+
+    python benchmarks/bench_discover_long.py [--samples 1000000] [--chunk 16384] [--scale ...]
 """
 
 import argparse
@@ -126,7 +130,11 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--samples", type=int, default=1_000_000)
     ap.add_argument("--chunk", type=int, default=16384, help="also run with --chunk N (0: not)")
+    ap.add_argument(
+        "--scale", default="100000,300000", help="smaller TRAIN sizes also run ('': none)"
+    )
     args = ap.parse_args()
+    sizes = [int(x) for x in args.scale.split(",") if x.strip()]
     import numpy as np
     from bench_discover import EFFECTS, EXPECTED
 
@@ -184,9 +192,43 @@ def main():
                 **_summary(proc_c, wall_c, cpu_c, peak_c, report_c),
                 precision=_precision(report, report_c),
             )
+        out["scale"] = [_size(n, args.chunk, tmp) for n in sizes if n < args.samples]
+        main_point = {"samples": args.samples, "wall_s": wall, "peak_rss_gb": peak}
+        if args.chunk:
+            main_point |= {
+                "chunked_wall_s": out["chunked"]["wall_s"],
+                "chunked_peak_rss_gb": out["chunked"]["peak_rss_gb"],
+            }
+        out["scale"].append(main_point)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     print(json.dumps(out, indent=2))
+
+
+def _size(n: int, chunk: int, tmp: Path) -> dict:
+    """Wall time and peak resident memory of the command on `n` TRAIN samples (in memory and,
+    with `chunk`, chunked), each in a fresh helper process."""
+    from bench_discover import EFFECTS
+
+    import hdjax
+    from tests.discover_data import synthetic_recording
+
+    d = tmp / f"n{n}"
+    d.mkdir()
+    hdjax.save_csv(synthetic_recording(1, EFFECTS, n=n), d / "train.csv")
+    hdjax.save_csv(synthetic_recording(2, EFFECTS, n=max(n // 4, 2000)), d / "test.csv")
+    cmd = [
+        sys.executable, "-m", "hdjax", "discover", "--train", str(d / "train.csv"),
+        "--test", str(d / "test.csv"), "--joint", str(tmp / "joint.toml"), "--no-cache",
+    ]  # fmt: skip
+    proc, wall, _, peak, _ = _run_isolated([*cmd, "--out", str(d / "out")], d / "out")
+    point = {"samples": n, "exit_code": proc.returncode, "wall_s": wall, "peak_rss_gb": peak}
+    if chunk:
+        cmd_c = [*cmd, "--out", str(d / "out_chunk"), "--chunk", str(chunk)]
+        proc, wall, _, peak, _ = _run_isolated(cmd_c, d / "out_chunk")
+        point |= {"chunked_exit_code": proc.returncode, "chunked_wall_s": wall,
+                  "chunked_peak_rss_gb": peak}  # fmt: skip
+    return point
 
 
 if __name__ == "__main__":

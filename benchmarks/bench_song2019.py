@@ -18,6 +18,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import tomllib
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -39,13 +40,16 @@ def main() -> dict:
         subprocess.run(command, cwd=REPO, env=env, check=True, stdout=subprocess.DEVNULL)
         wall = time.perf_counter() - start
         metrics = json.loads((out / "metrics.json").read_text())
+        rated = tomllib.loads((out / "config.resolved.toml").read_text())["joint"]["rated_torque"]
     paper = metrics["paper"]["errors_max_rms_Nm"]
     rows = []
     for name, model in metrics["model"]["scenarios"].items():
         row = {"experiment": name, "model max": model["max"], "model RMS": model["rms"]}
+        row["model max at s"] = model.get("max_at_s")
         network = metrics.get("network", {}).get("scenarios", {}).get(name)
         if network:
             row.update({"network max": network["max"], "network RMS": network["rms"]})
+            row["network max at s"] = network.get("max_at_s")
         if name in paper["model"]:
             row["paper model max"], row["paper model RMS"] = paper["model"][name]
         if name in paper.get("network", {}):
@@ -58,6 +62,7 @@ def main() -> dict:
         "duration_per_experiment_s": args.duration or 60.0,
         "process_wall_s": wall,
         "run_wall_s": metrics.get("wall_s"),
+        "rated_torque_Nm": float(rated),
         "target": f"process_wall_s < {TARGET_S:.0f}",
         "target_met": wall < TARGET_S,
         "errors_Nm": rows,

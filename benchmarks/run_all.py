@@ -10,7 +10,9 @@ process, one after the other, and prints JSON. This writes:
 - `benchmarks/results/<script>.json`: each script's JSON (the folder is not committed);
 - `docs/benchmarks/results.json`: the snapshot the page is made from (machine, date, commit,
   command, seconds and JSON of every script), committed with the page;
-- `docs/benchmarks.md`: the page, rendered by `benchmarks/_page.py`.
+- `docs/benchmarks.md`: the page, rendered by `benchmarks/_page.py`;
+- `docs/benchmarks/*.png`: its figures (the Song 2019 errors next to the paper's, time and
+  memory against samples), drawn by `benchmarks/_figures.py` from the same snapshot.
 
 With `--only`, the other scripts' entries of the existing snapshot are kept.
 """
@@ -31,6 +33,7 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(HERE))
 
+import _figures  # noqa: E402
 import _page  # noqa: E402
 
 # Smaller problems for --quick (scripts not listed run with their defaults).
@@ -39,7 +42,7 @@ QUICK = {
     "bench_sweep.py": ["--samples", "20000", "--repeats", "2"],
     "bench_network.py": ["--n-train", "2000", "--epochs", "50"],
     "compare_methods.py": ["--duration", "10", "--steps", "300"],
-    "bench_discover_long.py": ["--samples", "100000"],
+    "bench_discover_long.py": ["--samples", "100000", "--scale", "25000,50000"],
     "bench_fleet.py": ["--samples", "5000", "--logs", "4"],
     "bench_stream_parquet.py": ["--samples", "4000000", "--reference-samples", "500000"],
     "bench_warm_start.py": ["--samples", "20000"],
@@ -48,6 +51,7 @@ QUICK = {
 
 
 def scripts() -> list[str]:
+    """The benchmark scripts, by name, in the order they run."""
     found = sorted(p.name for p in HERE.glob("bench_*.py")) + ["compare_methods.py"]
     return [s for s in found if (HERE / s).exists()]
 
@@ -66,6 +70,8 @@ def _last_json(text: str):
 
 
 def run_one(script: str, quick: bool, timeout: float) -> dict:
+    """Run one script in its own process; its snapshot entry (command, seconds, date, load,
+    and its JSON or the tail of its error)."""
     args = QUICK.get(script, []) if quick else []
     command = [sys.executable, str(HERE / script), *args]
     print(f"[run_all] {' '.join(['python', 'benchmarks/' + script, *args])}", file=sys.stderr)
@@ -84,6 +90,7 @@ def run_one(script: str, quick: bool, timeout: float) -> dict:
     entry = {
         "script": f"benchmarks/{script}",
         "args": args,
+        "quick": bool(args),
         "seconds": seconds,
         "returncode": code,
         "date": date,
@@ -125,6 +132,7 @@ def _commit() -> str:
 
 
 def machine() -> dict:
+    """This machine: CPU, core count, platform, Python and JAX versions, load average."""
     import jax
 
     load = os.getloadavg() if hasattr(os, "getloadavg") else ()
@@ -139,6 +147,7 @@ def machine() -> dict:
 
 
 def main(argv=None) -> int:
+    """Run the chosen scripts, write the snapshot, the page and its figures; 1 if one failed."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smaller problems (minutes)")
     parser.add_argument("--only", action="append", metavar="SCRIPT", help="run only this script")
@@ -161,12 +170,17 @@ def main(argv=None) -> int:
     entries = {e["script"]: e for e in [run_one(s, args.quick, args.timeout) for s in chosen]}
     if args.only and snapshot_path.exists():
         old = json.loads(snapshot_path.read_text())
+        for e in old["benchmarks"]:  # an entry of an older snapshot: its run's settings
+            e.setdefault(
+                "quick", bool(old.get("quick")) and bool(QUICK.get(Path(e["script"]).name))
+            )
         merged = [entries.pop(e["script"], e) for e in old["benchmarks"]]
         entries = {e["script"]: e for e in merged + list(entries.values())}
     snapshot["benchmarks"] = sorted(entries.values(), key=lambda e: e["script"])
     snapshot_path.parent.mkdir(parents=True, exist_ok=True)
     snapshot_path.write_text(json.dumps(snapshot, indent=1) + "\n")
     (REPO / _page.PAGE).write_text(_page.render(snapshot))
+    _figures.write(snapshot, REPO / _page.FIGURES)
     failed = [e["script"] for e in snapshot["benchmarks"] if e.get("error")]
     print(f"[run_all] wrote {_page.PAGE}; failed: {failed or 'none'}", file=sys.stderr)
     return 1 if failed else 0

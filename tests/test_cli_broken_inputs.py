@@ -158,6 +158,22 @@ def _nothing(root: Path):
     pass
 
 
+def _outside(name: str, text: str):
+    """A file beside the case's world (outside the current directory of the command)."""
+
+    def setup(root: Path):
+        (root.parent / "outside").mkdir(exist_ok=True)
+        (root.parent / "outside" / name).write_text(text)
+
+    return setup
+
+
+FLEET_MANIFEST = (
+    '[fleet]\nname = "cell"\ntask = "calibrate"\n[[joints]]\nname = "j"\nratio = 160\n'
+    'rated_torque = 400\nlogs = [{ path = "data.csv", date = 2026-01-05 }]\n'
+)
+
+
 RUN = ["run", "proj/cfg.toml", "-q"]
 SWEEP = ["sweep", "proj/cfg.toml", "-q", "--setting", "model.poly_order", "--values", "1,2"]
 EST = ["estimate", "--model", "res/model.json", "--data", "proj/new.csv", "-q"]
@@ -210,13 +226,20 @@ CASES = [
     ("run-out-dot", RUN + ["--out", ".", "--overwrite"], _nothing, 2, None, ["holds the input"]),
     (
         "run-out-cwd-no-input",
-        ["run", "../world/proj/synth.toml", "-q", "--out", ".", "--overwrite"],
+        ["run", "../outside/synth.toml", "-q", "--out", ".", "--overwrite"],
+        _outside("synth.toml", SYNTHETIC),
+        2,
+        None,
+        [".: --out is the current directory", "never replaces"],
+    ),
+    (
+        "sweep-out-dot",
+        SWEEP + ["--out", ".", "--overwrite"],
         _nothing,
         2,
         None,
-        [],
+        [".: --out holds the input", "cfg.toml"],
     ),
-    ("sweep-out-dot", SWEEP + ["--out", ".", "--overwrite"], _nothing, 2, None, []),
     (
         "discover-out-holds-data",
         DISC + ["--out", "proj", "--overwrite"],
@@ -225,7 +248,14 @@ CASES = [
         None,
         ["holds the input"],
     ),
-    ("discover-out-dot", DISC + ["--out", ".", "--overwrite"], _nothing, 2, None, []),
+    (
+        "discover-out-dot",
+        DISC + ["--out", ".", "--overwrite"],
+        _nothing,
+        2,
+        None,
+        [".: --out holds the input proj/train.csv"],
+    ),
     (
         "run-out-inside-input-dir",
         ["estimate", "--model", "res", "--data", "proj/new.csv", "--out", "res/e.csv", "-q"],
@@ -315,7 +345,14 @@ CASES = [
         None,
         ["is a file, not a folder"],
     ),
-    ("run-out-in-proc", RUN + ["--out", "/proc/hdjax-out"], _nothing, 2, None, []),
+    (
+        "run-out-in-proc",
+        RUN + ["--out", "/proc/hdjax-out"],
+        _nothing,
+        2,
+        None,
+        ["/proc/hdjax-out: cannot create the result folder"],
+    ),
     (
         "estimate-out-dir-overwrite",
         EST + ["--out", "proj/sub", "--overwrite"],
@@ -773,7 +810,7 @@ CASES = [
         _set("proj/joint.toml", JOINT.replace("160", "100")),
         2,
         None,
-        [],
+        ["angles imply a reduction ratio of 16", "the joint file says 100"],
     ),
     (
         "discover-config-unknown-table",
@@ -940,11 +977,11 @@ CASES += [
     ),
     (
         "fleet-out-holds-manifest",
-        ["fleet", "proj/cfg.toml", "--out", "proj", "--overwrite"],
-        _nothing,
+        ["fleet", "proj/cell.toml", "--out", "proj", "--overwrite"],
+        _set("proj/cell.toml", FLEET_MANIFEST),
         2,
         None,
-        [],
+        ["proj: --out holds the input", "cell.toml"],
     ),
     (
         "bench-samples-huge",
@@ -1065,6 +1102,81 @@ CASES.append(
         [LATIN1, "constant"],  # read through the encoding, then refused for its constant value
     )
 )
+
+
+def _mcap_bytes(n: int = 200) -> bytes:
+    """A valid MCAP log of the five core columns on one JSON topic."""
+    from mcap.writer import Writer
+
+    buf = io.BytesIO()
+    w = Writer(buf)
+    w.start()
+    channel = w.register_channel("/j", "json", w.register_schema("j", "jsonschema", b"{}"))
+    for i in range(n):
+        row = {"t": i * 1e-3, "theta_m": 0.1 * i, "theta_l": 1e-3 * i, "current": 1.0}
+        w.add_message(channel, log_time=i, data=json.dumps(row | {"torque": 0.0}).encode(),
+                      publish_time=i)  # fmt: skip
+    w.finish()
+    return buf.getvalue()
+
+
+def _mcap(rel: str, damage: str):
+    """`rel` as a damaged MCAP file: cut at a fraction, its last 100 bytes cut, or no MCAP."""
+
+    def setup(root: Path):
+        data = _mcap_bytes()
+        if damage == "junk":
+            data = b"t,theta_m,theta_l,current,torque\n0,0,0,0,0\n"
+        elif damage == "tail":
+            data = data[:-100]
+        else:
+            data = data[: int(float(damage) * len(data))]
+        (root / rel).write_bytes(data)
+
+    return setup
+
+
+CASES.append(
+    (
+        "estimate-missing-column-names-the-flag",
+        EST + ["--out", "e.csv"],
+        _edit("proj/new.csv", lambda p: _drop_column(p, "current")),
+        2,
+        None,
+        ["missing column 'current'", "[data.columns]", "--columns FILE"],
+    )
+)
+
+# a truncated or non-MCAP file: one line from every command that reads a log
+for _damage in ("0.1", "0.5", "0.999", "tail", "junk"):
+    CASES += [
+        (
+            f"convert-mcap-{_damage}",
+            ["convert", "proj/log.mcap", "o.parquet", "-q"],
+            _mcap("proj/log.mcap", _damage),
+            2,
+            None,
+            ["proj/log.mcap", "not a readable MCAP file"],
+        ),
+        (
+            f"discover-mcap-{_damage}",
+            ["discover", "--train", "proj/log.mcap", "--test", "proj/test.csv"]
+            + ["--joint", "proj/joint.toml", "--quiet", "--no-figures", "--out", "d"],
+            _mcap("proj/log.mcap", _damage),
+            2,
+            None,
+            ["proj/log.mcap", "not a readable MCAP file"],
+        ),
+        (
+            f"estimate-mcap-{_damage}",
+            ["estimate", "--model", "res/model.json", "--data", "proj/log.mcap", "-q"]
+            + ["--out", "e.csv"],
+            _mcap("proj/log.mcap", _damage),
+            2,
+            None,
+            ["proj/log.mcap", "not a readable MCAP file"],
+        ),
+    ]
 
 
 def _check(root: Path, argv, code_expected, output, words, capsys):

@@ -211,3 +211,47 @@ def test_constant_extra_column(files, tmp_path, capsys):
         )
         == 0
     )
+
+
+def test_every_figure_panel_has_a_title(tmp_path, monkeypatch):
+    from matplotlib.figure import Figure
+
+    from hdjax.discover._report import _plot_spectra
+
+    class Spec:
+        orders = np.arange(1, 50) / 2
+        power = np.full(49, 0.01)
+
+    titles = []
+    monkeypatch.setattr(Figure, "savefig", lambda fig, *a, **k: titles.append(
+        [ax.get_title() for ax in fig.axes]))  # fmt: skip
+    _plot_spectra({"theta_m": Spec(), "theta_l": Spec()}, ["harmonic:theta_m:2"], "spectrum",
+                  tmp_path / "s.png")  # fmt: skip
+    ((motor, load),) = titles
+    assert "theta_m" in motor and "theta_l" in load
+
+
+def test_report_markdown_notes_once_under_a_heading_and_narrow_tables():
+    from hdjax.discover._report import report_markdown
+
+    amplitude = dict(arcsec=20.0, arcsec_ci95=[19.0, 21.0], nm=3.0, nm_ci95=[2.9, 3.1])
+    step = dict(effect="harmonic:theta_m:2", rms=1.1, max=7.9, cv_torque_rms=1.2,
+                cv_twist_rms_arcsec=3.4, cv_gain=0.5, stability=1.0, aliases=[],
+                amplitude=amplitude)  # fmt: skip
+    d = dict(
+        baseline=dict(rms=4.4, max=12.6, cv_torque_rms=4.5, cv_twist_rms_arcsec=9.0),
+        steps=[step],
+        stopping_rule="rule",
+        unexplained=[
+            dict(signal="theta_l", kind="order", order=3.0, amplitude_arcsec=1.0, explained=0.02)
+        ],
+        notes=["warning: k5 is poorly covered", "candidate x could not be added"] * 3,
+    )
+    md = report_markdown(d, [])
+    assert md.count("warning: k5 is poorly covered") == 1
+    assert md.count("candidate x could not be added") == 1
+    head, notes = md.split("## Notes\n", 1)
+    assert "- warning: k5" in notes and "Left unexplained" in head
+    rows = [line for line in md.splitlines() if line.startswith("|")]
+    assert max(line.count("|") - 1 for line in rows) <= 6  # no table wider than 6 columns
+    assert "20 arcsec [19, 21]" in md  # the details are still there, in the second table

@@ -325,3 +325,13 @@ def test_convert_cli(reference, tmp_path, capsys):
     assert main(["convert", str(broken), str(tmp_path / "b.parquet"), "--chunk", "64", "-q"]) == 2
     assert "non-numeric cell 'oops'" in capsys.readouterr().err
     assert not list(tmp_path.glob("*b.parquet*"))
+
+
+def test_estimate_help_names_every_format(capsys):
+    from hdjax._formats import SUFFIXES
+
+    assert main(["estimate", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    data = text.split("options:", 1)[1].split("--data DATA", 1)[1].split("--out", 1)[0]
+    for suffix in SUFFIXES:
+        assert suffix in data, (suffix, data)

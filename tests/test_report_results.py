@@ -23,10 +23,11 @@ def test_knee_of_an_l_shaped_curve():
     assert find_knee([3, 1, 2, 4, 5], [1.0, 9.0, 5.0, np.nan, 1.0]) == 0
 
 
-def test_no_knee_without_a_bend():
-    assert find_knee([1, 2, 3, 4], [4.0, 3.0, 2.0, 1.0]) is None  # straight line
-    assert find_knee([1, 2, 3], [1.0, 1.0, 1.0]) is None  # flat
-    assert find_knee([1, 2], [2.0, 1.0]) is None  # too few points
+def test_knee_of_curves_without_a_bend():
+    assert find_knee([1, 2, 3, 4], [4.0, 3.0, 2.0, 1.0]) == 3  # still falling: the last
+    assert find_knee([1, 2, 3], [1.0, 1.0, 1.0]) == 0  # flat: the cheapest
+    assert find_knee([1, 2], [2.0, 1.0]) == 1
+    assert find_knee([1, 2], [np.nan, np.inf]) is None  # nothing finite
 
 
 def test_figures_are_png():
@@ -148,3 +149,75 @@ def test_result_files_follow_the_umask(tmp_path):
 def test_markdown_table():
     text = markdown_table(["a", "b"], [[1.23456, None], ["x", float("nan")]])
     assert text.splitlines() == ["| a | b |", "|---|---|", "| 1.235 | n/a |", "| x | n/a |"]
+
+
+def test_knee_never_marks_a_point_worse_than_a_cheaper_one():
+    # a sweep whose error rises from its first value (a Fourier order of 0 is best): the knee
+    # is that first value; the chord rule marked order 1, 6 % worse than order 0
+    orders = [0, 1, 2, 3, 4]
+    rms = [4.787, 5.065, 5.2, 5.9, 6.4]
+    assert find_knee(orders, rms) == 0
+    # on any curve, no point cheaper than the knee is better, and the knee is within the
+    # stated 5 % of the best
+    rng = np.random.default_rng(0)  # seed 0, fixed
+    for _ in range(200):
+        y = rng.uniform(1.0, 10.0, size=7)
+        k = find_knee(range(7), y)
+        assert all(y[j] > y[k] for j in range(k)) and y[k] <= 1.05 * y.min()
+
+
+def _texts_inside(fig, ax):
+    """Every text artist of `ax` lies inside the axes' box, and the title inside the figure."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    box = ax.get_window_extent(renderer)
+    for t in ax.texts:
+        tb = t.get_window_extent(renderer)
+        assert box.x0 <= tb.x0 and tb.x1 <= box.x1 and box.y0 <= tb.y0 and tb.y1 <= box.y1, t
+    title = ax.title.get_window_extent(renderer)
+    assert 0 <= title.x0 and title.x1 <= fig.bbox.width, ax.get_title()
+
+
+def test_error_rate_figure_with_one_method():
+    import matplotlib.pyplot as plt
+
+    from hdjax.report import error_rate_title
+    from hdjax.report._figures import _error_rate
+
+    m = {"synthetic": {"max_pct": 2.2, "rms_pct": 0.42}}
+    fig = _error_rate({"model": m, "network": None}, paper=None, rated=400.0)
+    (ax,) = fig.axes
+    # the network was not run: no "n/a" mark, the title names the one method shown
+    assert not ax.texts and "both" not in ax.get_title()
+    assert ax.get_title() == error_rate_title({"model": m, "network": None})
+    assert "model-based" in ax.get_title() and "network" not in ax.get_title()
+    _texts_inside(fig, ax)
+    # a bar, not half the frame: at most 0.3 of the axis span on a single scenario
+    lo, hi = ax.get_xlim()
+    assert max(p.get_width() for p in ax.patches) <= 0.3 * (hi - lo)
+    # a log axis over the data's decades, without a 0 tick
+    assert ax.get_yscale() == "log"
+    ymin, ymax = ax.get_ylim()
+    assert 0 < ymin <= 0.42 and 2.2 < ymax <= 100
+    fig.canvas.draw()
+    labels = [t.get_text() for t in ax.get_yticklabels() if ymin <= t.get_position()[1] <= ymax]
+    assert labels and "0" not in labels
+    plt.close(fig)
+    both = {"model": m, "network": m}
+    assert "model-based and BP network" in error_rate_title(both)
+
+
+def test_sweep_figure_integer_ticks_and_fit_time_from_zero():
+    import matplotlib.pyplot as plt
+
+    from hdjax.report._figures import _sweep
+
+    fig = _sweep([0, 1, 2, 3], [4.787, 5.065, 5.2, 5.9], [0.147, 0.1505, 0.149, 0.148],
+                 setting="model.fourier_order", knee=0, metric="RMS")  # fmt: skip
+    ax, ax2 = fig.axes
+    fig.canvas.draw()
+    ticks = [t for t in ax.get_xticks() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]
+    assert ticks and all(float(t).is_integer() for t in ticks)
+    assert ax2.get_ylim()[0] == 0.0  # 0.147-0.1505 s is noise, drawn as such
+    assert ax.get_title()
+    plt.close(fig)

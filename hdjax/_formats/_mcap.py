@@ -14,7 +14,9 @@ choice that belongs before the log is read.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -59,21 +61,31 @@ def _decoder(path: Path, schema, channel):
 def _messages(path: Path, topics=None):
     """(topic, log_time [s], flat field dict) of every message, in log-time order."""
     require("mcap", "mcap")
-    from mcap.exceptions import McapError
     from mcap.reader import make_reader
 
     decoders = {}
+    with _readable(path), path.open("rb") as fh:
+        reader = make_reader(fh)
+        for schema, channel, message in reader.iter_messages(topics=topics):
+            dec = decoders.get(channel.id)
+            if dec is None:
+                dec = decoders[channel.id] = _decoder(path, schema, channel)
+            flat: dict = {}
+            _flatten(dec(message.data), "", flat)
+            yield channel.topic, message.log_time * 1e-9, flat
+
+
+@contextlib.contextmanager
+def _readable(path: Path):
+    """Turn what the `mcap` reader raises on a damaged file (truncated, not MCAP at all) into
+    one line; every read of the file goes through here."""
+    from mcap.exceptions import McapError
+
     try:
-        with path.open("rb") as fh:
-            reader = make_reader(fh)
-            for schema, channel, message in reader.iter_messages(topics=topics):
-                dec = decoders.get(channel.id)
-                if dec is None:
-                    dec = decoders[channel.id] = _decoder(path, schema, channel)
-                flat: dict = {}
-                _flatten(dec(message.data), "", flat)
-                yield channel.topic, message.log_time * 1e-9, flat
-    except (McapError, json.JSONDecodeError, EOFError, ValueError) as err:
+        yield
+    except DataError:  # already one line (a message encoding hdjax does not read)
+        raise
+    except (McapError, json.JSONDecodeError, EOFError, ValueError, struct.error) as err:
         raise DataError(
             f"{path}: not a readable MCAP file ({' '.join(str(err).split())})"
         ) from None
@@ -85,7 +97,7 @@ def _catalogue(path: Path) -> tuple[list[str], dict[str, tuple[str, str]]]:
     require("mcap", "mcap")
     from mcap.reader import make_reader
 
-    with path.open("rb") as fh:
+    with _readable(path), path.open("rb") as fh:
         summary = make_reader(fh).get_summary()
     all_topics = {c.topic for c in summary.channels.values()} if summary else None
     for topic, _, flat in _messages(path):

@@ -7,7 +7,7 @@ from pathlib import Path
 # compliance.estimate_torque is looked up at each call (a test stops the command there)
 from .. import compliance
 from .._errors import DataError, ModelMismatchError, UnitWarning
-from .._formats import load_recording
+from .._formats import SUFFIXES, load_recording
 from .._io import atomic_write_bytes, csv_bytes
 from .._joint import load_joint
 from .._memory import check_read_memory
@@ -26,7 +26,7 @@ from ._common import (
     read_column_map,
 )
 
-HELP = "estimate torque on a new recording with a saved model (CSV in, CSV out)"
+HELP = "estimate torque on a new recording with a saved model (any log format in, CSV out)"
 EXAMPLE = """\
 example:
   hdjax estimate --model runs/song2019/model.json --data new.csv --out torque.csv
@@ -40,7 +40,12 @@ a reference torque, torque_measured is added and the RMS / maximum error go to s
 def add_parser(sub) -> None:
     p = add_command(sub, "estimate", HELP, EXAMPLE)
     add_model_options(p, "use")
-    p.add_argument("--data", required=True, help="the recording (.csv or .npz)")
+    p.add_argument(
+        "--data",
+        required=True,
+        help=f"the recording, in any format hdjax reads ({', '.join(SUFFIXES)}; chosen by the "
+        "suffix)",
+    )
     p.add_argument("--out", required=True, help="where to write the estimate (.csv)")
     p.add_argument(
         "--columns",
@@ -92,7 +97,12 @@ def command(args, parser) -> int:
     joint = load_joint(args.joint) if args.joint else None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UnitWarning)
-        rec = load_recording(args.data, cmap)
+        try:
+            rec = load_recording(args.data, cmap)
+        except DataError as err:
+            if cmap is None and "[data.columns]" in str(err):  # say where such a table goes
+                raise DataError(f"{err} in a TOML file given with --columns FILE") from None
+            raise
     for w in caught:
         if not issubclass(w.category, UnitWarning):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)

@@ -333,11 +333,17 @@ def _n_workers(client) -> int:
 
 
 def _running(client, futures) -> int:
+    """Tasks executing now. Dask's `processing()` lists every task a worker holds, the ones
+    queued behind its threads too: a worker runs at most one task per thread."""
     try:
-        keys = {k for v in client.processing().values() for k in v}
+        held, threads = client.processing(), client.nthreads()
     except Exception:  # noqa: BLE001 - only for the progress line
         return 0
-    return sum(1 for f in futures if f.key in keys and not f.done())
+    pending = {f.key for f in futures if not f.done()}
+    return sum(
+        min(sum(k in pending for k in keys), threads.get(worker, 1))
+        for worker, keys in held.items()
+    )
 
 
 def _report(man, rows, rd) -> None:

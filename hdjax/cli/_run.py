@@ -20,7 +20,14 @@ from ..config import (
 from ..config._preflight import check_angles
 from ..network import predict_torque as net_estimate
 from ..pipelines import _paper as P
-from ..report import ResultDir, environment, error_rate_figure, markdown_table, torque_figure
+from ..report import (
+    ResultDir,
+    environment,
+    error_rate_figure,
+    error_rate_title,
+    markdown_table,
+    torque_figure,
+)
 from ._common import Progress, add_experiment_command, experiment_inputs, parse_overrides
 
 HELP = "run an experiment config: calibrate, estimate, score, write figures and a report"
@@ -192,7 +199,7 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
         rates["network"] = metrics["network"].get("scenarios")
         paper = P.PAPER_ERRORS if outputs["paper_reference"] else None
         rd.write_bytes("figures/error_rate.png", error_rate_figure(rates, paper=paper, rated=rated))
-        figures.append(("figures/error_rate.png", "error rate, both methods (cf. Fig. 17)"))
+        figures.append(("figures/error_rate.png", error_rate_title(rates)))
 
     # -- files -------------------------------------------------------------------------------
     if outputs["save_model"]:

@@ -26,6 +26,7 @@ from ..pipelines import _paper as P
 from ..pipelines._streamed import StreamedEstimate
 from ..reference import describe_column_reference
 from ..report import environment, find_knee, markdown_table, sweep_figure
+from ..report._figures import KNEE_RULE
 from ._common import (
     Progress,
     add_experiment_command,
@@ -258,7 +259,7 @@ def _sweep_into(rd, exp, setting, values, cfgs, progress, fresh, force):
         f"# Sweep over `{setting}` ({exp['experiment']['name']})",
         "",
         f"Held-out error: the torque RMS over every sample of the test recordings; the knee "
-        f"(largest drop below the chord of the error curve) is "
+        f"({KNEE_RULE}) is "
         f"{'`' + json.dumps(values[knee]) + '`' if knee is not None else 'not defined'}.",
         "",
         markdown_table(header, table),

@@ -16,6 +16,7 @@ residual loop) are always shared.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
 from typing import Any
 
@@ -32,6 +33,14 @@ from ._terms import term_from_dict, term_to_dict
 
 KINEMATIC_FORMS = ("paper", "harmonic", "none")
 _PAPER_K_NAMES = ("k3", "k2", "k1", "k4", "k5")
+_SEGMENT_NAME = re.compile(r"k([1-9]|\[\d+\])")
+
+
+def is_segment_name(name: str) -> bool:
+    """Whether a coefficient name (of `ComplianceModel.term_names`) is a segment
+    compliance $k_j$: `k1`..`k5` of the paper's five segments or `k[j]` of any other count;
+    not `k0`, the twist model's constant (eq. (10))."""
+    return _SEGMENT_NAME.fullmatch(name) is not None
 
 
 def paper_knots(rated_torque: float, n_segments: int = 5) -> tuple[float, ...]:

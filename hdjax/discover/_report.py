@@ -75,7 +75,7 @@ def report_dict(solution: Solution, *, extra: dict | None = None) -> dict:
         "cv_block_samples": result.cv_block_samples,
         "cv_test_ratio": result.cv_test_ratio,
         "reference_checks": result.reference_checks,
-        "notes": result.notes,
+        "notes": list(dict.fromkeys(result.notes)),  # a note raised on every fold: once
         "final_model": solution.value.to_dict(),
         "seconds": solution.stats["fit_time_s"],
     }
@@ -97,8 +97,8 @@ def _plot_spectra(spectra, chosen, title, path):
                 ax.axvline(float(parts[2]), color="C3", ls="--", lw=1, label=key)
         ax.set_xlabel(f"order of {signal}")
         ax.set_ylabel("explained variance [%]")
+        ax.set_title(f"{title}: {signal}", fontsize=9)  # every panel names its signal
         ax.legend(loc="upper right", fontsize=8) if ax.get_legend_handles_labels()[0] else None
-    axes[0].set_title(title)
     fixed_margins(fig)
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -117,7 +117,7 @@ def _plot_residual_vs_angle(model, data: PipelineData, title, path):
         ax.plot(th, r[idx], ".", ms=1.5, alpha=0.5)
         ax.set_xlabel(f"{name} mod 2π [rad]")
         ax.set_ylabel("twist residual [arcsec]")
-    axes[0].set_title(title)
+        ax.set_title(f"{title}, against {name}", fontsize=9)
     fixed_margins(fig)
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -207,17 +207,20 @@ def write_figures(solution: Solution, train, folder: Path) -> list[tuple[str, st
 
 
 def report_markdown(d: dict, figures: list[tuple[str, str]]) -> str:
+    """The `report.md` of a report dict and its (caption, file name) figures."""
     lines = ["# hdjax discover", ""]
+    # two tables, each narrow enough for the page: the errors, then each step's evidence
     lines.append(
         "| step | effect | TEST RMS [N·m] | TEST max [N·m] | CV torque RMS [N·m] | "
-        "CV twist RMS [arcsec] | CV twist gain | stability | amplitude (95 % interval) |"
+        "CV twist RMS [arcsec] |"
     )
-    lines.append("|---|---|---|---|---|---|---|---|---|")
+    lines.append("|---|---|---|---|---|---|")
     b = d["baseline"]
     lines.append(
         f"| 0 | starting model | {b['rms']:.4g} | {b['max']:.4g} | {b['cv_torque_rms']:.4g} | "
-        f"{b['cv_twist_rms_arcsec']:.4g} | | | |"
+        f"{b['cv_twist_rms_arcsec']:.4g} |"
     )
+    details = []
     for i, s in enumerate(d["steps"], 1):
         a = s.get("amplitude") or {}
         amp = (
@@ -228,9 +231,20 @@ def report_markdown(d: dict, figures: list[tuple[str, str]]) -> str:
         )
         lines.append(
             f"| {i} | `{s['effect']}` | {s['rms']:.4g} | {s['max']:.4g} | "
-            f"{s['cv_torque_rms']:.4g} | {s['cv_twist_rms_arcsec']:.4g} | {s['cv_gain']:.1%} | "
-            f"{s['stability']:.0%} | {amp} |"
+            f"{s['cv_torque_rms']:.4g} | {s['cv_twist_rms_arcsec']:.4g} |"
         )
+        details.append(f"| {i} | {s['cv_gain']:.1%} | {s['stability']:.0%} | {amp} |")
+    if details:
+        lines += [
+            "",
+            "Each step's evidence (CV twist gain: the share of the cross-validated twist error"
+            " it removes; stability: the share of resampled fold assignments in which it is"
+            " eligible):",
+            "",
+            "| step | CV twist gain | stability | amplitude (95 % interval) |",
+            "|---|---|---|---|",
+            *details,
+        ]
     aliased = [(i, s) for i, s in enumerate(d["steps"], 1) if s.get("aliases")]
     if aliased:
         lines += ["", "Effects TRAIN cannot tell apart (columns spanning the same directions):", ""]
@@ -248,9 +262,9 @@ def report_markdown(d: dict, figures: list[tuple[str, str]]) -> str:
             )
         lines.append("")
     lines += _checks_lines(d)
-    for note in d["notes"]:
-        lines.append(f"- {note}")
-    lines.append("")
+    notes = list(dict.fromkeys(d["notes"]))
+    if notes:
+        lines += ["## Notes", ""] + [f"- {note}" for note in notes] + [""]
     for caption, name in figures:
         lines += [f"![{caption}](figures/{name})", ""]
     return "\n".join(lines)

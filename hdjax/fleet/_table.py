@@ -9,6 +9,7 @@ import numpy as np
 from .._formats import require
 from .._io import atomic_write_bytes
 from .._plotting import png_bytes, pyplot
+from ..compliance._model import is_segment_name
 
 FIXED = (
     ("task_id", "string"),
@@ -101,9 +102,7 @@ def drift_figure(joint: str, rows: list[dict]) -> bytes:
     plt = pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(7.5, 8.0), sharex=True)
     dates = [_date(r["date"]) for r in ok]
-    k_names = sorted(
-        {n for r in ok for n in r.get("coefficients", {}) if n.startswith("k") and n[1:].isdigit()}
-    )
+    k_names = sorted({n for r in ok for n in r.get("coefficients", {}) if is_segment_name(n)})
     for n in k_names:
         y = [1.0 / r["coefficients"][n] if r["coefficients"].get(n) else np.nan for r in ok]
         axes[0].plot(dates, np.asarray(y) / 1e3, "o-", label=n)
@@ -136,7 +135,8 @@ def drift_figure(joint: str, rows: list[dict]) -> bytes:
         if np.isfinite(np.asarray(y, float)).any():
             axes[2].plot(dates, y, "o-", label=label)
     axes[2].set_ylabel("error")
-    axes[2].legend(fontsize=7)
+    if axes[2].get_lines():
+        axes[2].legend(fontsize=7)
     axes[2].set_xlabel("log date")
     n_failed = sum(r.get("status") != "ok" for r in rows)
     note = f" ({n_failed} failed task(s) left out)" if n_failed else ""

@@ -131,14 +131,18 @@ def estimate_model(model, recordings: dict[str, Recording | PartStream]) -> dict
 def metrics_of(
     estimates: dict, recordings: dict[str, Recording | PartStream], rated: float
 ) -> dict:
-    """name -> error metrics dict (rms, max, bias, rms_pct, max_pct, n), over all samples."""
+    """name -> error metrics dict (rms, max, bias, rms_pct, max_pct, n), over all samples; an
+    in-memory recording's also has `max_at_s`, the time of its largest error."""
     out = {}
     for name, est in estimates.items():
         if isinstance(est, S.StreamedEstimate):  # errors summed chunk by chunk
             out[name] = est.errors.as_dict(rated, in_range=est.in_range)
             continue
         torque = est.torque if hasattr(est, "torque") else est
-        m = error_metrics(torque, recordings[name].column("torque"), rated).as_dict()
+        measured = recordings[name].column("torque")
+        m = error_metrics(torque, measured, rated).as_dict()
+        worst = int(np.argmax(np.abs(np.asarray(torque) - np.asarray(measured))))
+        m["max_at_s"] = float(np.asarray(recordings[name].column("t"))[worst])
         if hasattr(est, "in_range"):
             m["out_of_range_pct"] = 100.0 * float(1.0 - np.mean(np.asarray(est.in_range)))
         out[name] = m

@@ -14,6 +14,7 @@
 
 from ._figures import (
     error_rate_figure as error_rate_figure,
+    error_rate_title as error_rate_title,
     find_knee as find_knee,
     sweep_figure as sweep_figure,
     torque_figure as torque_figure,

@@ -93,40 +93,56 @@ def torque_figure(
 
 
 def error_rate_figure(metrics: dict, *, paper: dict | None = None, rated: float) -> bytes:
-    """Error rate in % of rated torque, both methods side by side (as Song et al. Fig. 17).
+    """Error rate in % of rated torque, the methods side by side (as Song et al. Fig. 17).
 
     **Arguments:**
 
     - `metrics`: method -> scenario -> metrics dict (`max_pct`, `rms_pct`); a method whose
-      value is `None` is drawn as "not available".
+      value is `None` (not run) is left out of the figure.
     - `paper`: method -> scenario -> (max, RMS) [N·m] of the paper, drawn as markers.
     - `rated`: rated torque [N·m] (for the paper's values in %).
 
     **Returns:** PNG bytes.
     """
+    return _png(_error_rate(metrics, paper=paper, rated=rated))
+
+
+def error_rate_title(metrics: dict) -> str:
+    """The title of [`hdjax.report.error_rate_figure`][] for `metrics`: the methods it shows."""
+    shown = [_METHOD_NAME.get(m, m) for m, v in metrics.items() if v is not None]
+    what = " and ".join(shown) if len(shown) <= 2 else ", ".join(shown)
+    return f"Error rate, {what or 'no method'} (cf. Song et al. Fig. 17)"
+
+
+_METHOD_NAME = {"model": "model-based", "network": "BP network"}
+
+
+def _error_rate(metrics: dict, *, paper: dict | None, rated: float):
+    from matplotlib.ticker import FuncFormatter
+
     plt = _plt()
-    methods = list(metrics)
+    methods = [m for m in metrics if metrics[m] is not None]
     scenarios = []
     for m in methods:
-        for s in metrics[m] or {}:
+        for s in metrics[m]:
             if s not in scenarios:
                 scenarios.append(s)
     fig, ax = plt.subplots(figsize=(7.5, 4.2))
-    width = 0.8 / max(1, len(methods))
+    # a bar is at most 0.35 of a scenario's slot, so one method on one scenario stays a bar
+    width = min(0.35, 0.8 / max(1, len(methods)))
     colors = {"model": "tab:blue", "network": "tab:orange"}
     x = np.arange(len(scenarios))
+    shown = []
     for i, m in enumerate(methods):
-        pos = x - 0.4 + width * (i + 0.5)
+        pos = x + width * (i - (len(methods) - 1) / 2)
         vals = metrics[m]
         color = colors.get(m, f"C{i}")
-        if vals is None:
-            for p in pos:
-                ax.text(p, 0.5, "n/a", ha="center", fontsize=8, rotation=90)
-            continue
         mx = [vals[s]["max_pct"] if s in vals else np.nan for s in scenarios]
         rms = [vals[s]["rms_pct"] if s in vals else np.nan for s in scenarios]
-        ax.bar(pos, mx, width * 0.9, color=color, alpha=0.45, label=f"{m}: max")
-        ax.bar(pos, rms, width * 0.9, color=color, alpha=1.0, label=f"{m}: RMS")
+        name = _METHOD_NAME.get(m, m)
+        ax.bar(pos, mx, width * 0.9, color=color, alpha=0.45, label=f"{name}: max")
+        ax.bar(pos, rms, width * 0.9, color=color, alpha=1.0, label=f"{name}: RMS")
+        shown += mx + rms
         if paper and m in paper:
             pm = [100 * paper[m][s][0] / rated if s in paper[m] else np.nan for s in scenarios]
             pr = [100 * paper[m][s][1] / rated if s in paper[m] else np.nan for s in scenarios]
@@ -134,44 +150,61 @@ def error_rate_figure(metrics: dict, *, paper: dict | None = None, rated: float)
             ax.plot(
                 pos, pr, "_", color="black", ms=12, mew=2, label="paper: RMS" if i == 0 else None
             )
+            shown += pm + pr
     ax.set_xticks(x)
     ax.set_xticklabels(scenarios)
+    ax.set_xlim(-0.6, len(scenarios) - 0.4)
     ax.set_ylabel("error [% of rated torque]")
-    ax.set_title("Error rate, both methods (cf. Song et al. Fig. 17)", fontsize=10)
-    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set_title(error_rate_title(metrics), fontsize=10)
+    # a log axis over the drawn values' decades (an error rate of 0 is not drawn)
+    positive = [v for v in shown if np.isfinite(v) and v > 0]
+    ax.set_yscale("log")
+    if positive:
+        lo = 10 ** np.floor(np.log10(min(positive)))
+        hi = 10 ** np.ceil(np.log10(max(positive) * 1.5))
+        ax.set_ylim(lo, hi)
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     ax.grid(alpha=0.3, axis="y")
-    ax.legend(fontsize=7, ncol=2)
+    if methods:
+        ax.legend(fontsize=7, ncol=2, loc="upper left")
     fig.tight_layout()
-    return _png(fig)
+    return fig
+
+
+KNEE_TOLERANCE = 0.05
+KNEE_RULE = (
+    "the cheapest value (the smallest, or the first listed) whose held-out error is within "
+    f"{KNEE_TOLERANCE:.0%} of the smallest held-out error"
+)
 
 
 def find_knee(
-    x: Real[ArrayLike, " n"] | Sequence[float], y: Real[ArrayLike, " n"] | Sequence[float]
+    x: Real[ArrayLike, " n"] | Sequence[float],
+    y: Real[ArrayLike, " n"] | Sequence[float],
+    *,
+    tolerance: float = KNEE_TOLERANCE,
 ) -> int | None:
-    """Index of the knee of a decreasing error curve (largest distance below the chord).
+    """Index of the knee of a sweep: the cheapest setting whose error is close to the best.
 
-    Both axes are scaled to [0, 1]; the knee is the point farthest below the straight line from
-    the first to the last point (the "Kneedle" rule of Satopää et al. 2011). `None` for fewer
-    than three finite points or a curve that does not bend below its chord.
+    The knee is the point of smallest `x` (the cheapest setting) whose `y` is at most
+    `(1 + tolerance)` times the smallest `y`. Every point cheaper than the knee is therefore
+    worse than it by more than `tolerance`, and no point more than `tolerance` worse than the
+    best is marked: a curve whose error rises from its first point has its knee there.
+
+    **Arguments:** `x`, the swept setting (its order is the cost); `y`, the error at each;
+    `tolerance`, the relative error above the best that still counts as good enough
+    (default 5 %). Non-finite points are skipped.
+
+    **Returns:** the index into `x`, or `None` when no point is finite.
     """
     x = np.asarray(x, np.float64)
     y = np.asarray(y, np.float64)
-    ok = np.isfinite(x) & np.isfinite(y)
-    idx = np.flatnonzero(ok)
-    if idx.size < 3:
+    idx = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
+    if idx.size == 0:
         return None
-    xs, ys = x[idx], y[idx]
-    order = np.argsort(xs)
-    xs, ys, idx = xs[order], ys[order], idx[order]
-    xr = (xs - xs[0]) / (xs[-1] - xs[0]) if xs[-1] > xs[0] else np.zeros_like(xs)
-    span = ys.max() - ys.min()
-    if span <= 0:
-        return None
-    yr = (ys - ys.min()) / span
-    chord = yr[0] + (yr[-1] - yr[0]) * xr
-    below = chord - yr
-    k = int(np.argmax(below))
-    return int(idx[k]) if below[k] > 1e-12 else None
+    best = float(np.min(y[idx]))
+    good = idx[y[idx] <= best + tolerance * abs(best)]
+    return int(good[np.argmin(x[good])])
 
 
 def sweep_figure(
@@ -185,8 +218,16 @@ def sweep_figure(
 ) -> bytes:
     """Held-out error and compute time against a swept setting, with the knee marked.
 
+    **Arguments:** `values`, the swept setting's values (integer settings get integer ticks);
+    `error` and `seconds` at each; `setting`, its name; `knee`, the index to mark (see
+    [`hdjax.report.find_knee`][]) or `None`; `metric`, the error's name ("RMS").
+
     **Returns:** PNG bytes.
     """
+    return _png(_sweep(values, error, seconds, setting=setting, knee=knee, metric=metric))
+
+
+def _sweep(values, error, seconds, *, setting, knee, metric):
     plt = _plt()
     labels = [str(v) for v in values]
     numeric = all(isinstance(v, int | float) and not isinstance(v, bool) for v in values)
@@ -199,17 +240,26 @@ def sweep_figure(
     if np.all(err[np.isfinite(err)] > 0) and np.nanmax(err) / max(np.nanmin(err), 1e-300) > 30:
         ax.set_yscale("log")
     ax.grid(alpha=0.3)
-    if not numeric:
+    integer = numeric and all(float(v).is_integer() for v in values)
+    if not numeric or (integer and len(values) <= 15):
         ax.set_xticks(x)
         ax.set_xticklabels(labels)
+    elif integer:
+        from matplotlib.ticker import MaxNLocator
+
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax2 = ax.twinx()
-    ax2.plot(x, np.asarray(seconds, np.float64), "s--", color="tab:gray", label="fit time")
+    secs = np.asarray(seconds, np.float64)
+    ax2.plot(x, secs, "s--", color="tab:gray", label="fit time")
     ax2.set_ylabel("fit time [s]")
+    # from 0, so timing noise of a few per cent does not look like a trend
+    finite = secs[np.isfinite(secs)]
+    ax2.set_ylim(0.0, 1.15 * float(finite.max()) if finite.size and finite.max() > 0 else 1.0)
     if knee is not None:
         ax.axvline(x[knee], color="tab:red", ls=":", lw=1.5)
         ax.plot([x[knee]], [err[knee]], "o", ms=12, mfc="none", mec="tab:red", mew=2)
         ax.annotate(
-            f"knee: {labels[knee]}",
+            f"knee: {labels[knee]} (within {KNEE_TOLERANCE:.0%} of the best)",
             (x[knee], err[knee]),
             textcoords="offset points",
             xytext=(10, 12),
@@ -220,4 +270,4 @@ def sweep_figure(
     h2, l2 = ax2.get_legend_handles_labels()
     ax.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper right")
     fig.tight_layout()
-    return _png(fig)
+    return fig
