@@ -150,11 +150,13 @@ def _config_inputs(path: Path) -> list[Path]:
 
 
 def _run_into(rd, args: argparse.Namespace) -> int:
-    cfg_notes, cfg = [], {}
+    cfg_notes, cfg, context = [], {}, None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if args.config is not None:
-            train, test, joint, cfg, cfg_notes = load_discover_config(args.config)
+            train, test, joint, cfg, cfg_notes, context = load_discover_config(
+                args.config, with_context=True
+            )
         else:
             joint = load_joint(args.joint)
             # every log format, by suffix, through the loader the other commands use; with
@@ -184,7 +186,10 @@ def _run_into(rd, args: argparse.Namespace) -> int:
             lambda x: x.extras, r, {k: v for k, v in r.extras.items() if k not in ignore}
         )
         train, test = drop(train), drop(test)
-    result = _loop.discover(train, test, joint, options, progress=say)
+        context = None if context is None else drop(context)
+    # one log cut into TRAIN and TEST: the loop sees it whole (not chunk by chunk)
+    context = context if not options.chunk else None
+    result = _loop.discover(train, test, joint, options, progress=say, context=context)
     result.aux.notes[:0] = cfg_notes + notes + [f"input warning: {w.message}" for w in caught]
     say("writing report" + ("" if args.no_figures else " and figures"))
     write_report(

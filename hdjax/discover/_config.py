@@ -45,8 +45,10 @@ _DISCOVER_KEYS = (
 )
 
 
-def load_discover_config(path):
-    """Read a discover experiment: returns `(train, test, joint, options dict, notes)`."""
+def load_discover_config(path, with_context: bool = False):
+    """Read a discover experiment: returns `(train, test, joint, options dict, notes)`, and
+    with `with_context` also the log TRAIN and TEST were cut from (`test_blocks`; `None` for
+    two logs), for [`hdjax.discover.discover`][]'s `context`."""
     path = Path(path)
     doc = read_toml(path)
     for key in doc:
@@ -74,6 +76,7 @@ def load_discover_config(path):
     if "path" in data:
         rec, described = load(here / data["path"])
         notes.append(described)
+        context = rec
         block, every = _test_blocks(data.get("test_blocks", {}), f"{path} [data] test_blocks")
         n = rec.n_samples
         if n <= (every - 1) * block:
@@ -92,10 +95,13 @@ def load_discover_config(path):
     elif "train" in data and "test" in data:
         (train, described), (test, _) = load(here / data["train"]), load(here / data["test"])
         notes.append(described)
+        context = None
     else:
         raise ConfigError(f"{path} [data]: give either 'path' or both 'train' and 'test'")
     options = doc.get("discover", {})
     check_keys(options, _DISCOVER_KEYS, f"{path} [discover]")
+    if with_context:
+        return train, test, joint, options, notes, context
     return train, test, joint, options, notes
 
 

@@ -273,10 +273,11 @@ def report_markdown(d: dict, figures: list[tuple[str, str]]) -> str:
 def _checks_lines(d: dict) -> list[str]:
     """The cross-validated against the TEST error, and the reference checks that found
     something (markdown lines)."""
-    final_cv = d["steps"][-1]["cv_torque_rms"] if d["steps"] else d["baseline"]["cv_torque_rms"]
+    last = d["steps"][-1] if d["steps"] else d["baseline"]
+    final_cv, final_test = last["cv_torque_rms"], d.get("final", last)["rms"]
     ratio = d.get("cv_test_ratio", float("nan"))
     out = [
-        f"Cross-validated torque RMS on TRAIN {final_cv:.4g} N·m, TEST RMS {d['final']['rms']:.4g} "
+        f"Cross-validated torque RMS on TRAIN {final_cv:.4g} N·m, TEST RMS {final_test:.4g} "
         f"N·m (ratio {ratio:.2g}"
         + (
             "; cross-validation does not represent TEST)."
