@@ -255,3 +255,20 @@ def test_report_markdown_notes_once_under_a_heading_and_narrow_tables():
     rows = [line for line in md.splitlines() if line.startswith("|")]
     assert max(line.count("|") - 1 for line in rows) <= 6  # no table wider than 6 columns
     assert "20 arcsec [19, 21]" in md  # the details are still there, in the second table
+
+
+def test_one_log_cut_by_test_blocks_runs_whole_and_draws_its_figures(files, tmp_path):
+    # TRAIN and TEST from one log: the loop sees the log whole (context) and the report's
+    # figures are drawn from TEST's own rows
+    cfg = tmp_path / "disc.toml"
+    cfg.write_text(
+        "[joint]\nratio = 160\nrated_torque = 400\n"
+        f'[data]\npath = "{files / "train.csv"}"\ntest_blocks = {{ block = 500, every = 4 }}\n'
+        "[discover]\nmax_effects = 1\n"
+    )
+    out = tmp_path / "out"
+    assert cli_main(["--config", str(cfg), "--out", str(out), "--quiet"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert any("blocks of one log" in n for n in rep["notes"]), rep["notes"]
+    assert rep["effects"] == ["harmonic:theta_m:2"]
+    assert (out / "figures" / "spectrum_0.png").exists()

@@ -10,6 +10,7 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 
+from .._custom_types import Bool, Float
 from ._model import ComplianceModel
 
 SLOPE_FLOOR = 0.01
@@ -71,8 +72,14 @@ class ShapeData:
             d /= np.linalg.norm(d, axis=1, keepdims=True)
             self.directions = np.vstack([np.eye(q), -np.eye(q), d])
 
-    def add(self, x: np.ndarray, b: np.ndarray, torque: np.ndarray) -> None:
-        """Add a block: `x` its columns (in the `layout`), `b` the twist, `torque` the
+    def add(
+        self,
+        x: Float[np.ndarray, "_ _"],
+        b: Float[np.ndarray, " n"],
+        torque: Float[np.ndarray, " n"],
+    ) -> None:
+        """Add a block: `x` its columns (in the `layout`: coefficients by rows when compact,
+        rows by coefficients when full), `b` the twist, `torque` the
         reference torque of the rows."""
         t = np.asarray(torque, np.float64)
         b = np.asarray(b, np.float64)
@@ -181,12 +188,18 @@ class ShapeConstraint:
     `compliance` (the data's overall compliance it is a fraction of).
     """
 
-    rows: np.ndarray
+    rows: Float[np.ndarray, "m p"]
     floor: float
     compliance: float
 
     @classmethod
-    def of(cls, model: ComplianceModel, data: ShapeData, active, fraction: float = SLOPE_FLOOR):
+    def of(
+        cls,
+        model: ComplianceModel,
+        data: ShapeData,
+        active: Bool[np.ndarray, " p"],
+        fraction: float = SLOPE_FLOOR,
+    ) -> ShapeConstraint | None:
         """The constraint of `model` on the rows accumulated in `data`; `None` when the twist
         does not rise with torque over them (no floor can be set; the sign is then wrong)."""
         k = data.compliance()
@@ -194,13 +207,13 @@ class ShapeConstraint:
             return None
         return cls(slope_rows(model, data.points, active), fraction * k, k)
 
-    def violation(self, coef: np.ndarray) -> float:
+    def violation(self, coef: Float[np.ndarray, " p"]) -> float:
         """How far the slope falls below the floor at worst [rad/(N·m)] (0 when it holds)."""
         if self.rows.shape[0] == 0:
             return 0.0
         return float(max(0.0, np.max(self.floor - self.rows @ coef)))
 
-    def active_segments(self, coef: np.ndarray, n_seg: int) -> np.ndarray:
+    def active_segments(self, coef: Float[np.ndarray, " p"], n_seg: int) -> Bool[np.ndarray, " s"]:
         """The segments at least one of whose constraints holds with equality."""
         if self.rows.shape[0] == 0:
             return np.zeros(n_seg, bool)
@@ -209,11 +222,11 @@ class ShapeConstraint:
 
     def solve(
         self,
-        coef: np.ndarray,
-        g: np.ndarray,
-        active: np.ndarray,
-        residual_pass: Callable[[np.ndarray], np.ndarray] | None = None,
-    ) -> np.ndarray:
+        coef: Float[np.ndarray, " p"],
+        g: Float[np.ndarray, "p p"],
+        active: Bool[np.ndarray, " p"],
+        residual_pass: Callable[[Float[np.ndarray, " p"]], Float[np.ndarray, " p"]] | None = None,
+    ) -> Float[np.ndarray, " p"]:
         """The coefficients closest to the least-squares solution `coef` in the metric of the
         Gram matrix `g` that satisfy the constraint (see the module docstring); `coef`
         itself, unchanged, when it already does.

@@ -699,6 +699,7 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
     notes: list[str] = []
     phase = Phases()
     extra_columns = _usable_columns(train)
+    test_recording = test  # the record keeps TEST as given (figures, reports)
     train, test = _parts(train, test, joint, options, context, notes)
     with phase("baseline"):
         model = baseline_model = calibrate_baseline(train, joint, options, notes)
@@ -998,7 +999,7 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
         final_ranking=ranking,
         train_residual_final=resid,
         notes=list(dict.fromkeys(notes)),
-        test=test,
+        test=test_recording,
         unexplained=left,
         cv_block_samples=int(block),
         reference_checks=checks,

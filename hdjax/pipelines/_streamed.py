@@ -48,15 +48,24 @@ class ErrorSums:
         self.total = 0.0
         self.squares = 0.0
         self.peak = 0.0
+        self.peak_t = None
         self.out_of_range = 0
         self.finite = True
 
-    def add(self, err: np.ndarray, in_range: np.ndarray | None = None) -> None:
+    def add(
+        self, err: np.ndarray, in_range: np.ndarray | None = None, t: np.ndarray | None = None
+    ) -> None:
+        """Add a chunk's errors (and, with its timestamps `t`, track when the largest was: the
+        first of equal ones, as `np.argmax` over the whole record)."""
         self.finite = self.finite and bool(np.isfinite(err).all())
         self.n += err.shape[0]
         self.total += float(np.sum(err))
         self.squares += float(np.sum(err * err))
-        self.peak = max(self.peak, float(np.max(np.abs(err)))) if err.size else self.peak
+        if err.size:
+            k = int(np.argmax(np.abs(err)))
+            if self.peak_t is None or abs(float(err[k])) > self.peak:
+                self.peak_t = None if t is None else float(np.asarray(t)[k])
+            self.peak = max(self.peak, abs(float(err[k])))
         if in_range is not None:
             self.out_of_range += int(np.sum(~np.asarray(in_range, bool)))
 
@@ -65,6 +74,7 @@ class ErrorSums:
         for k in ("n", "total", "squares", "out_of_range"):
             setattr(out, k, getattr(self, k) + getattr(other, k))
         out.peak, out.finite = max(self.peak, other.peak), self.finite and other.finite
+        out.peak_t = self.peak_t if self.peak >= other.peak else other.peak_t
         return out
 
     @property
@@ -85,6 +95,8 @@ class ErrorSums:
             "max_pct": 100.0 * self.peak / rated,
             "n": self.n,
         }
+        if self.peak_t is not None:
+            out["max_at_s"] = self.peak_t
         if in_range:
             out["out_of_range_pct"] = 100.0 * self.out_of_range / self.n
         return out
@@ -221,7 +233,7 @@ def estimate_model_streamed(model, stream: RecordingStream, n: int, chunk: int):
     sums, env = ErrorSums(), _Envelope(n)
     for rows, est in model_estimates(model, stream, chunk):
         torque, ref = np.asarray(est.torque), np.asarray(rows.torque)
-        sums.add(torque - ref, np.asarray(est.in_range))
+        sums.add(torque - ref, np.asarray(est.in_range), np.asarray(rows.t))
         env.add(np.asarray(rows.t), ref, torque)
     return StreamedEstimate(sums, *env.series(), in_range=True)
 
@@ -286,7 +298,7 @@ def estimate_network_streamed(net, joint, stream: RecordingStream, n: int):
     sums, env = ErrorSums(), _Envelope(n)
     for feats, ref, t in stream_features(stream, joint, **kw):
         torque = np.asarray(nw.predict(net, feats))
-        sums.add(torque - ref)
+        sums.add(torque - ref, t=t)
         env.add(t, ref, torque)
     return StreamedEstimate(sums, *env.series())
 

@@ -37,7 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import PRNGKeyArray
+from .._custom_types import Float, PRNGKeyArray
 from .._errors import ConfigError
 from .._recording import Recording
 from ._params import PlantParams
@@ -186,7 +186,7 @@ def real_log(
     t_start: float = 0.0,
     source: str = "real-log plant",
     with_truth: bool = False,
-) -> Recording | tuple[Recording, dict[str, np.ndarray]]:
+) -> Recording | tuple[Recording, dict[str, Float[np.ndarray, " n"]]]:
     """Read a finely sampled noiseless simulation (`truth`, with `true_*` extras: a
     [`hdjax.plant.simulate`][] run with `truth=True` and noise off) through the sensors of a
     real log, from `t_start` on (see the module docstring).
@@ -256,7 +256,7 @@ def simulate_real_log(
     dt: float = 2.5e-4,
     with_truth: bool = False,
     **drive: float | tuple[tuple[float, float], ...],
-) -> Recording | tuple[Recording, dict[str, np.ndarray]]:
+) -> Recording | tuple[Recording, dict[str, Float[np.ndarray, " n"]]]:
     """A one-way-sweep scenario ([`sweep_drive`][], keywords `drive`) simulated at step `dt`
     and read through a real log's sensors ([`real_log`][]).
 
