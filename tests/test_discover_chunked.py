@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import hdjax
+import hdjax.cli
 from hdjax import ConfigError
 from hdjax.discover import _pipeline as pipe
 from hdjax.discover._chunked import check_chunk, dahl_chunked
@@ -209,17 +210,17 @@ def test_chunked_candidate_scores_equal_in_memory(base):
     assert len(s0) == len(s1) > 10
     assert _rel(r1, r0) < RTOL
     for a, b in zip(s0, s1):
-        assert a[0].key == b[0].key and a[0].term == b[0].term
+        assert a.candidate.key == b.candidate.key and a.candidate.term == b.candidate.term
         # gains are shares of the twist error (unit scale) from Gram statistics, which carry
         # their own rounding error, up to the scaled condition number of A^T A (here ~1e10)
         # times the roundoff (the in-memory pass differs from per-fold QR by ~1e-6 on these
         # data): two summation orders agree to that bound, not to 1e-9; it is far below any
         # decision (min_gain 0.05). A fold's gain is relative to its own base error, so a
         # large one scales the bound.
-        assert _gain_close(a[1], b[1], tol)
-        assert _gain_close(a[2], b[2], tol)
-        assert a[3] == b[3]  # sparse regression's choice
-        assert _gain_close(a[4], b[4], tol)
+        assert _gain_close(a.gain, b.gain, tol)
+        assert _gain_close(a.fold_gains, b.fold_gains, tol)
+        assert a.selected == b.selected  # sparse regression's choice
+        assert _gain_close(a.resampled, b.resampled, tol)
 
 
 def test_chunked_intervals_equal_in_memory(base):
@@ -281,8 +282,6 @@ def test_chunk_must_be_an_integer(bad):
 
 
 def test_cli_rejects_a_short_chunk(tmp_path, capsys):
-    from hdjax.cli._discover import cli_main
-
     rec = synthetic_recording(3, n=200)
     train, test = tmp_path / "train.csv", tmp_path / "test.csv"
     hdjax.save_csv(rec, train)
@@ -290,7 +289,7 @@ def test_cli_rejects_a_short_chunk(tmp_path, capsys):
     joint = tmp_path / "joint.toml"
     joint.write_text("[joint]\nratio = 160\nrated_torque = 400\n")
     argv = ["--train", train, "--test", test, "--joint", joint, "--out", tmp_path / "o"]
-    code = cli_main([str(a) for a in argv] + ["--chunk", "8"])
+    code = hdjax.cli.main(["discover", *map(str, argv), "--chunk", "8"])
     assert code == 2
     err = capsys.readouterr().err
     assert "chunk" in err and "at least 16" in err
@@ -331,7 +330,7 @@ def test_chunked_scores_hold_chunks_not_the_record(base, monkeypatch):
         scored, _, _ = score_candidates(model, data, opts, (), folds=folds, blocks=blocks, est=est)
     finally:
         tracemalloc.stop()
-    width = sum(len(s[0].term.names()) for s in scored) + model.n_coef
+    width = sum(len(s.candidate.term.names()) for s in scored) + model.n_coef
     whole = data.sig.n_samples * width * 8
     # what stays is the thinned rows (every 20th) and the chunk being read (a fifth of the
     # record), about a third of `whole` here; views of every chunk keep more than all of it

@@ -6,9 +6,14 @@ import numpy as np
 import pytest
 
 import hdjax
-from hdjax.cli._discover import cli_main
+from hdjax.cli import main
 
 from .discover_data import synthetic_recording
+
+
+def _discover_cli(argv):
+    """`hdjax discover ARGV` through the `hdjax` command's one entry point."""
+    return main(["discover", *map(str, argv)])
 
 
 @pytest.fixture(scope="module")
@@ -35,13 +40,13 @@ def _run(files, out, *extra, train="train.csv", test="test.csv"):
         "--quiet",
         *extra,
     ]
-    return cli_main(argv)
+    return _discover_cli(argv)
 
 
 def _one_line_error(capsys, *words):
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0, err
-    assert err.startswith("hdjax discover: error:")
+    assert err.startswith(("hdjax: error:", "hdjax discover: error:")), err
     for w in words:
         assert w in err, err
     return err
@@ -267,7 +272,7 @@ def test_one_log_cut_by_test_blocks_runs_whole_and_draws_its_figures(files, tmp_
         "[discover]\nmax_effects = 1\n"
     )
     out = tmp_path / "out"
-    assert cli_main(["--config", str(cfg), "--out", str(out), "--quiet"]) == 0
+    assert _discover_cli(["--config", str(cfg), "--out", str(out), "--quiet"]) == 0
     rep = json.loads((out / "report.json").read_text())
     assert any("blocks of one log" in n for n in rep["notes"]), rep["notes"]
     assert rep["effects"] == ["harmonic:theta_m:2"]

@@ -134,7 +134,7 @@ def test_fold_solver_equals_lstsq_on_the_training_rows(seed):
 
 
 def test_usable_check_equals_the_whole_array_check():
-    from hdjax.discover._loop import _usable
+    from hdjax.discover._scores import _usable
 
     rng = np.random.default_rng(0)
     x = rng.standard_normal((500, 2))

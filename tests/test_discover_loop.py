@@ -12,7 +12,7 @@ import json
 import numpy as np
 import pytest
 
-from hdjax.cli._discover import cli_main
+from hdjax.cli import main
 from hdjax.compliance import ColumnTimesTorque, Coulomb, Hysteresis
 from hdjax.discover import DiscoverOptions, discover, refit_structure
 
@@ -26,6 +26,11 @@ CASES = {
     "temperature": ([("temperature", 0.02)], "column:temperature*torque"),
     "coulomb_l": ([("coulomb_l", 8 * ARCSEC, 0.05)], "coulomb:omega_l"),
 }
+
+
+def _discover_cli(argv):
+    """`hdjax discover ARGV` through the `hdjax` command's one entry point."""
+    return main(["discover", *map(str, argv)])
 
 
 def _true_rms(train, test, term):
@@ -64,7 +69,7 @@ def test_clean_synthetic_adds_nothing():
 
 def test_lara8_config_runs_on_real_data(lara8_dir, tmp_path):
     out = tmp_path / "lara8"
-    rc = cli_main(
+    rc = _discover_cli(
         [
             "--config",
             str(REPO / "experiments" / "lara8_discover.toml"),

@@ -9,7 +9,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from hdjax.discover._loop import DiscoverOptions, _parsimonious
+from hdjax.discover._decision import Trial, choose
+from hdjax.discover._options import DiscoverOptions
 from hdjax.discover._pipeline import CrossValidation, within_one_se
 
 N_BLOCKS, PER_BLOCK = 10, 10
@@ -51,7 +52,7 @@ def test_unscored_samples_are_left_out_and_a_failed_estimate_is_never_within():
 def _trial(key, n_columns, sq):
     term = SimpleNamespace(names=lambda: tuple(f"c{i}" for i in range(n_columns)))
     cv = _cv(sq)
-    return (cv.torque_rms, SimpleNamespace(key=key, term=term), 0.0, [], 1.0, None, None, cv)
+    return Trial(SimpleNamespace(key=key, term=term), 0.0, np.zeros(0), 1.0, None, None, cv)
 
 
 def test_the_simpler_of_two_indistinguishable_candidates_is_chosen():
@@ -60,10 +61,12 @@ def test_the_simpler_of_two_indistinguishable_candidates_is_chosen():
     near = _trial("coulomb", 1, _shifted(0.3, 1.0))  # within one standard error of `rich`
     far = _trial("viscous", 1, _shifted(0.4, 1.0))  # not within
     opts, notes = DiscoverOptions(), []
-    assert _parsimonious([rich, near, far], current, BLOCKS, opts, notes)[1].key == "coulomb"
+    assert choose([rich, near, far], current, BLOCKS, opts, notes).key == "coulomb"
     assert "within one standard error" in notes[0]
-    assert _parsimonious([rich, far], current, BLOCKS, opts, [])[1].key == "harmonic"
+    assert choose([rich, far], current, BLOCKS, opts, []).key == "harmonic"
     # a simpler candidate that does not lower the current error by `min_torque_gain` is not
     # chosen, however close to the lowest
     current = _cv(np.full(BLOCKS.size, 1.3))
-    assert _parsimonious([rich, near], current, BLOCKS, opts, [])[1].key == "harmonic"
+    assert choose([rich, near], current, BLOCKS, opts, []).key == "harmonic"
+    # and when not even the lowest does, none is chosen: the loop stops
+    assert choose([rich, near], _cv(np.full(BLOCKS.size, 1.0)), BLOCKS, opts, []) is None

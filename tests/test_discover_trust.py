@@ -28,8 +28,9 @@ import hdjax
 from hdjax import plant
 from hdjax.compliance import ColumnTimesTorque, Coulomb, Harmonics
 from hdjax.discover import DiscoverOptions, discover, refit_structure
-from hdjax.discover._loop import _as_data, calibrate_baseline
+from hdjax.discover._loop import calibrate_baseline
 from hdjax.discover._pipeline import calibrate, design, estimate
+from hdjax.discover._scores import _as_data
 from hdjax.discover._uncertainty import bootstrap_length, effect_intervals, instrument_torque
 from hdjax.effects import TwistHysteresis, twist_compliance
 

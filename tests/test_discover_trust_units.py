@@ -24,6 +24,7 @@ import scipy.signal
 
 from hdjax.compliance import ComplianceModel, Signals
 from hdjax.discover import DiscoverOptions, build_library, discover
+from hdjax.discover._decision import Scored, eligible, rank
 from hdjax.discover._folds import (
     GAP_FACTOR,
     MAX_BLOCKS,
@@ -35,7 +36,6 @@ from hdjax.discover._folds import (
 )
 from hdjax.discover._gram import block_statistics, fold_gains
 from hdjax.discover._library import LibraryOptions
-from hdjax.discover._loop import _best_per_key, _eligible
 from hdjax.discover._report import write_report
 from hdjax.discover._spectrum import order_spectrum
 from hdjax.discover._unexplained import unexplained_structure
@@ -133,7 +133,7 @@ def test_a_candidate_that_helps_only_under_one_fold_deal_is_not_eligible():
     resampled = [fold_gains(stats, d, N_FOLDS)[0] for d in deals]
     options = DiscoverOptions()
     scored = [
-        (
+        Scored(
             types.SimpleNamespace(key=key),
             float(total[i]),
             per_fold[i],
@@ -142,15 +142,15 @@ def test_a_candidate_that_helps_only_under_one_fold_deal_is_not_eligible():
         )
         for i, key in enumerate(["genuine", "spurious"])
     ]
-    ranked = _best_per_key(scored, options.min_gain)
-    stability = {r[0].key: r[4] for r in ranked}
+    ranked = rank(scored, options.min_gain)
+    stability = {r.candidate.key: r.stability for r in ranked}
     # the spurious group's standard gain passes min_gain: only stability can reject it
     assert _helps(standard) and total[1] >= 2 * options.min_gain, total
     expected = np.mean([_helps(d) for d in deals])
     assert stability["spurious"] == pytest.approx(expected, abs=0.051), (stability, expected)
     assert stability["spurious"] < options.min_stability
     assert stability["genuine"] == 1.0 and total[0] >= 2 * options.min_gain
-    assert [r[0].key for r in _eligible(ranked, options)] == ["genuine"]
+    assert [r.candidate.key for r in eligible(ranked, options)] == ["genuine"]
 
 
 # -- fold blocks -------------------------------------------------------------------------------

@@ -18,7 +18,7 @@ from pathlib import Path
 import equinox as eqx
 
 from .. import __version__
-from .._errors import DataError, HdjaxError
+from .._errors import DataError
 from .._formats import load_recording
 from .._io import read_toml
 from .._joint import load_joint
@@ -27,9 +27,13 @@ from ..discover import _loop  # `_loop.discover` looked up at call time, where a
 from ..discover._checks import check_inputs
 from ..discover._chunked import check_chunk
 from ..discover._config import load_discover_config
-from ..discover._report import write_report
+from ..discover._options import DiscoverOptions
+from ..discover._report import write_report_into
 from ..report import ResultDir
-from ._common import Parser, ParserExit, UsageError
+from ._common import Parser
+
+DEFAULTS = DiscoverOptions()
+"""The command line's defaults are the loop's own."""
 
 HELP = "residual loop: find, trace and add missing effects, report the torque error before/after"
 
@@ -89,13 +93,19 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
         help="replace an earlier hdjax result at --out (never any other folder, an input or the "
         "current directory)",
     )
-    p.add_argument("--max-effects", type=int, default=5, help="most effects to add (default 5)")
+    p.add_argument(
+        "--max-effects",
+        type=int,
+        default=DEFAULTS.max_effects,
+        help=f"most effects to add (default {DEFAULTS.max_effects})",
+    )
     p.add_argument(
         "--min-gain",
         type=float,
-        default=0.05,
-        help="least cross-validated share of the twist error an effect must remove, "
-        "in the standard folds and in at least 70 %% of resampled fold assignments (default 0.05)",
+        default=DEFAULTS.min_gain,
+        help="least cross-validated share of the twist error an effect must remove, in the "
+        f"standard folds and in at least {100 * DEFAULTS.min_stability:.0f} %% of resampled fold "
+        f"assignments (default {DEFAULTS.min_gain:g})",
     )
     p.add_argument(
         "--chunk",
@@ -167,12 +177,12 @@ def _run_into(rd, args: argparse.Namespace) -> int:
     say = (lambda s: None) if args.quiet else (lambda s: print(f"[discover] {s}", file=sys.stderr))
     for w in caught:
         say(f"warning: {w.message}")
-    options = _loop.DiscoverOptions(
+    options = DiscoverOptions(
         max_effects=int(cfg.get("max_effects", args.max_effects)),
         min_gain=float(cfg.get("min_gain", args.min_gain)),
-        n_segments=int(cfg.get("n_segments", 5)),
-        poly_order=int(cfg.get("poly_order", 6)),
-        fourier_order=int(cfg.get("fourier_order", 3)),
+        n_segments=int(cfg.get("n_segments", DEFAULTS.n_segments)),
+        poly_order=int(cfg.get("poly_order", DEFAULTS.poly_order)),
+        fourier_order=int(cfg.get("fourier_order", DEFAULTS.fourier_order)),
         chunk=check_chunk(
             cfg.get("chunk", args.chunk), "[discover] chunk" if "chunk" in cfg else "--chunk"
         ),
@@ -192,9 +202,9 @@ def _run_into(rd, args: argparse.Namespace) -> int:
     result = _loop.discover(train, test, joint, options, progress=say, context=context)
     result.aux.notes[:0] = cfg_notes + notes + [f"input warning: {w.message}" for w in caught]
     say("writing report" + ("" if args.no_figures else " and figures"))
-    write_report(
+    write_report_into(
+        rd,
         result,
-        rd.staging,
         train=train,
         figures=not args.no_figures,
         extra={
@@ -210,22 +220,3 @@ def _run_into(rd, args: argparse.Namespace) -> int:
         f"TEST torque RMS {result.aux.baseline.rms:.4g} -> {result.aux.final.rms:.4g} N·m"
     )
     return 0
-
-
-def cli_main(argv: list[str] | None = None) -> int:
-    """Entry point: parse `argv`, run, and turn bad input into one line on stderr, exit 2.
-
-    The same as `hdjax discover ...` (`hdjax.cli.main(["discover", ...])`), with the messages
-    prefixed `hdjax discover: error:`.
-    """
-    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
-    try:
-        args = build_parser().parse_strict(argv)
-        return run(args)
-    except ParserExit as done:
-        return done.status
-    except (HdjaxError, UsageError) as err:
-        text = " ".join(str(err).split())
-        text = text.removeprefix("hdjax discover: ")
-        print(f"hdjax discover: error: {text}", file=sys.stderr)
-        return 2

@@ -280,7 +280,9 @@ def _batch_statistics(a, yt, groups, bounds, chunks, project):
     return ab, cc
 
 
-def _chol_solve(g: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+def gram_solve(g: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """The least-squares coefficients from normal equations `g x = rhs` (Cholesky; a
+    minimum-norm least-squares solve where `g` is singular)."""
     try:
         c = np.linalg.cholesky(g)
     except np.linalg.LinAlgError:
@@ -318,7 +320,7 @@ def fold_gains(stats: BlockStatistics, fold_of_block: np.ndarray, n_folds: int):
         aa = g_tr[np.ix_(base, base)]
         ay = g_tr[base, yi]
         ac = g_tr[base, p + 1 :]
-        sol = _chol_solve(aa, np.column_stack([ay, ac]))
+        sol = gram_solve(aa, np.column_stack([ay, ac]))
         theta0, w_all = sol[:, 0], sol[:, 1:]
         t_aa = g_te[np.ix_(base, base)]
         t_ay = g_te[base, yi]

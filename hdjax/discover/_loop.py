@@ -12,8 +12,8 @@
    share of the cross-validated twist error it removes (exactly, by Frisch-Waugh-Lovell
    updates of per-fold QR factors), on the standard folds and on every resampled deal.
 4. **Screening.** A candidate is eligible when pysindy's STLSQ selects it, it removes at least
-   `min_gain` (default 5 %) of the cross-validated twist error, and it does so in at least
-   `min_stability` (70 %) of the resampled fold assignments (stability selection).
+   `min_gain` of the cross-validated twist error, and it does so in at least
+   `min_stability` of the resampled fold assignments (stability selection).
 5. **Acceptance in the torque domain.** For the `n_shortlist` best eligible candidates, the
    whole pipeline runs per fold: calibration on the fold's training part, then inversion
    (eqs. (26)-(27)), with memory states computed causally from the estimate exactly as on
@@ -32,6 +32,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -44,11 +45,11 @@ from .._recording import Recording
 from .._solution import RESULTS, Solution
 from ..compliance import ComplianceModel, merge_sparse_segments
 from ..compliance._lstsq import CalibrationData, failure_message, prepare
-from ..effects import AbstractTerm, current_viscous_slope, velocity_reading
+from ..effects import AbstractTerm
 from ..reference import reference_checks
 from ._aliases import find_aliases
-from ._chunked import Chunks, DahlCarry, check_chunk, own_rows, sequential
 from ._chunked_fits import twist_residual
+from ._decision import Ranked, Trial, choose, eligible, qualifies, rank, speed_reading
 from ._folds import (
     contiguous_blocks,
     correlation_length,
@@ -57,8 +58,7 @@ from ._folds import (
     resampled_assignments,
     run_length,
 )
-from ._gram import block_statistics_batched, block_statistics_streamed, fold_gains
-from ._library import LibraryOptions, build_library, candidate_columns
+from ._options import DiscoverOptions as DiscoverOptions, stopping_rule
 from ._pipeline import (
     PipelineData,
     calibrate,
@@ -70,53 +70,14 @@ from ._pipeline import (
     estimate,
     fit_merging,
     has_path,
-    pipeline_signals,
-    within_one_se,
 )
-from ._select import (
-    MAX_SINDY_ROWS,
-    block_grams,
-    cv_gains,
-    cv_gains_by_blocks,
-    fold_basis,
-    sindy_select,
-)
+from ._scores import _as_data, score_candidates as score_candidates, training_data
 from ._spectrum import OrderSpectrum, order_spectrum
 from ._timing import Phases, null_phases
 from ._uncertainty import bootstrap_length, effect_intervals, instrument_torque
 from ._unexplained import all_spectra, unexplained_structure
 
 ARCSEC = 180.0 * 3600.0 / np.pi
-
-
-@dataclasses.dataclass(frozen=True)
-class DiscoverOptions:
-    """Settings of the residual loop (see the module docstring for the stopping rule)."""
-
-    max_effects: int = 5
-    min_gain: float = 0.05
-    min_torque_gain: float = 0.02
-    min_stability: float = 0.7
-    n_resamples: int = 20
-    n_shortlist: int = 3
-    n_grid_tries: int = 3
-    seed: int = 0
-    n_folds: int = 5
-    block: int = 200
-    sindy_threshold: float = 0.02
-    library: LibraryOptions = dataclasses.field(default_factory=LibraryOptions)
-    n_segments: int = 5
-    poly_order: int = 6
-    fourier_order: int = 3
-    per_segment: bool = False
-    current_scale: float | None = None
-    chunk: int = 0
-    """Samples per chunk of the loop's least-squares fits (calibration, cross-validation,
-    candidate scores, intervals), so that no design of the whole record is formed; 0: the
-    whole record at once. Same coefficients to 1e-9 relative; memory bounded by the chunk."""
-
-    def __post_init__(self):
-        check_chunk(self.chunk)
 
 
 @dataclasses.dataclass
@@ -169,6 +130,9 @@ class DiscoveryRecord:
     cv_test_ratio: float = float("nan")
     """The final cross-validated torque RMS over the TEST RMS: far from 1 (above 2 or below
     1/2), cross-validation does not represent TEST."""
+    stopping_rule: str = ""
+    """The rule the loop stopped by, in words, with its settings
+    ([`hdjax.discover._options.stopping_rule`][])."""
 
     @property
     def effects(self) -> list[str]:
@@ -235,16 +199,6 @@ def calibrate_baseline(
     raise CalibrationError(f"no starting model could be calibrated on the training data: {last}")
 
 
-def _as_data(model, data, joint: Joint | None = None) -> PipelineData:
-    """`data` as pipeline signals (a recording's derived with `model`'s or `joint`'s ratio and
-    sign)."""
-    if isinstance(data, PipelineData):
-        return data
-    if model is None:
-        return pipeline_signals(data, joint.ratio, joint.twist_sign, "difference")
-    return pipeline_signals(data, model.ratio, model.twist_sign, model.velocity)
-
-
 def _test_errors(model, test, rated):
     """TEST torque errors of `model` (the pipeline's signals: gaps honoured; with a context,
     estimated through the whole log and scored on TEST's rows). **Returns:** the metrics and
@@ -273,365 +227,6 @@ def _residual(model, data: PipelineData, driver, chunk: int) -> np.ndarray:
 
 def _usable_columns(train: Recording) -> tuple[str, ...]:
     return tuple(name for name, x in train.extras.items() if float(np.ptp(np.asarray(x))) > 0.0)
-
-
-def training_data(model: ComplianceModel, train, estimate_=None):
-    """Training signals and reference torque, with the present model's torque *estimate* as the
-    driver of path-dependent candidates (hysteresis is computed from the torque being
-    estimated, causally, never from the reference sensor)."""
-    data = _as_data(model, train)
-    driver = estimate(model, data) if estimate_ is None else estimate_
-    return data.pair(driver)
-
-
-def _fold_of_block(blocks: np.ndarray, folds) -> np.ndarray:
-    """The fold of each block, for held-out sets made of whole blocks."""
-    out = np.zeros(int(blocks.max()) + 1, int)
-    for f, te in enumerate(folds):
-        out[blocks[te]] = f
-    return out
-
-
-BATCH_COLUMNS = 16
-"""Candidate columns computed and summed into the block statistics at once (memory: this
-many columns of the record, not the whole library's)."""
-
-
-def _usable(c: np.ndarray) -> bool:
-    """A candidate whose columns are finite and not constant can be scored.
-
-    Column by column (a reduction along the first axis of an `(n, 2)` array is several times
-    slower); a column is finite exactly when its minimum and maximum are."""
-    varies = False
-    for j in range(c.shape[1]):
-        lo, hi = c[:, j].min(), c[:, j].max()
-        if not (np.isfinite(lo) and np.isfinite(hi)):
-            return False
-        varies = varies or bool(hi > lo)
-    return varies
-
-
-def _streamed_scores(cands, sig, torque, a, y, resid, blocks, options, phase, take=None):
-    """Block statistics of the candidates' columns, computed `BATCH_COLUMNS` columns at a
-    time, and the sparse regression on every `step`-th sample of them (the rows
-    [`sindy_select`][hdjax.discover._select.sindy_select] reads).
-
-    `take` (optional) takes a part's rows from columns computed on the whole record.
-
-    **Returns:** `(sindy-selected per column, owner candidate per column, usable candidate
-    indices, BlockStatistics of the usable candidates)`.
-    """
-    take = take or (lambda x: x)
-    n = a.shape[0]
-    step = max(1, n // MAX_SINDY_ROWS)
-    thin: list[np.ndarray] = []
-    owner: list[int] = []
-    usable: list[int] = []
-
-    def batches():
-        batch, width = [], 0
-        for i, cand in enumerate(cands):
-            c = take(candidate_columns(cand.term, sig, torque))
-            for j in range(c.shape[1]):
-                thin.append(np.ascontiguousarray(c[::step, j]))
-                owner.append(i)
-            if _usable(c):
-                usable.append(i)
-                batch.append(c)
-                width += c.shape[1]
-            if width >= BATCH_COLUMNS:
-                yield batch
-                batch, width = [], 0
-        if batch:
-            yield batch
-
-    with phase("twist CV"):  # the candidates' columns included
-        stats = block_statistics_batched(a, batches(), y, blocks)
-    with phase("sindy"):
-        # every `step`-th row, as `sindy_select` takes them (it keeps these rows whole)
-        selected = sindy_select(
-            a[::step],
-            resid[::step],
-            thin,
-            [str(o) for o in owner],
-            threshold=options.sindy_threshold,
-        )
-    return selected, np.asarray(owner), usable, stats
-
-
-def _chunked_scores(cands, model, chunks: Chunks, resid, blocks, options, phase):
-    """[`_streamed_scores`][] with the base design and every candidate's columns formed chunk
-    by chunk ([`hdjax.discover._gram.block_statistics_streamed`][]); the Dahl states of
-    hysteresis candidates carry across chunks. The sparse regression reads the same rows
-    (every `step`-th sample), gathered during the first pass."""
-    model = canonical(model)
-    n = chunks.n
-    step = max(1, n // MAX_SINDY_ROWS)
-    active = np.asarray(model.active)
-    widths = []
-    lo_hi = []  # per candidate column: running minimum and maximum
-    thin_a, thin_c = [], []
-    first = [True]
-
-    def passes():
-        carry = DahlCarry()
-        for lo, hi, sc, tc, a_full, h in chunks.rows(model):
-            a = a_full if active.all() else np.compress(active, a_full, axis=1)
-            rows = hi - lo
-            groups = []
-            for i, cand in enumerate(cands):
-                if sequential(cand.term):
-                    c = carry.column(
-                        i,
-                        cand.term,
-                        own_rows(sc, h),
-                        own_rows(tc, h),
-                        rows,
-                        cand.term.score_in_numpy,
-                    )
-                    c = c[:, None]
-                else:
-                    c = candidate_columns(cand.term, sc, tc)[h : h + rows]
-                groups.append(np.asarray(c, np.float64))
-            if first[0]:
-                # copies, not views: a view of every `step`-th row keeps the whole chunk's
-                # arrays alive, and memory would grow with the record instead of the chunk
-                start = (-lo) % step
-                thin_a.append(np.array(a[start::step]))
-                thin_c.append([np.array(g[start::step]) for g in groups])
-                lo_hi.append([(g.min(axis=0), g.max(axis=0)) for g in groups])
-            yield lo, hi, a, groups
-        first[0] = False
-
-    def usable_groups():
-        for i in range(len(cands)):
-            lo_ = np.min([m[i][0] for m in lo_hi], axis=0)
-            hi_ = np.max([m[i][1] for m in lo_hi], axis=0)
-            finite = np.all(np.isfinite(lo_)) and np.all(np.isfinite(hi_))
-            if finite and np.any(hi_ > lo_):
-                widths.append(i)
-        return widths
-
-    with phase("twist CV"):  # the candidates' columns included
-        stats = block_statistics_streamed(passes, chunks.sig.twist, blocks, usable_groups)
-    with phase("sindy"):
-        thin, owner = [], []
-        for i in range(len(cands)):
-            cat = np.concatenate([t[i] for t in thin_c])
-            for j in range(cat.shape[1]):
-                thin.append(np.ascontiguousarray(cat[:, j]))
-                owner.append(i)
-        selected = sindy_select(
-            np.concatenate(thin_a),
-            resid[::step],
-            thin,
-            [str(o) for o in owner],
-            threshold=options.sindy_threshold,
-        )
-    return selected, np.asarray(owner), widths, stats
-
-
-def score_candidates(
-    model,
-    train,
-    options: DiscoverOptions,
-    extra_columns,
-    *,
-    folds=None,
-    blocks=None,
-    resamples=(),
-    est=None,
-    phases=None,
-    unidentified=None,
-):
-    """Library, spectra and per-candidate scores for one step (the families' reasons for
-    offering nothing appended to `unidentified`, when given).
-
-    With `blocks` (the folds' whole contiguous blocks), every cross-validated score comes from
-    one pass of per-block Gram statistics ([`hdjax.discover._gram`][]); without, from per-fold
-    QR factors ([`hdjax.discover._select.cv_gains`][]).
-
-    **Returns:** `(scored, spectra, resid)`, `scored` a list of `(candidate, gain, fold gains,
-    sindy-selected, gains over the resampled fold assignments)`.
-    """
-    phase = phases or null_phases()
-    data = _as_data(model, train)
-    chunk = options.chunk
-    take = data.part  # columns are computed on the whole record, scored on the part's rows
-    with phase("design"):
-        sig, torque = training_data(model, data, est)
-        y = take(sig.twist)
-        if chunk:
-            a = None
-            resid = twist_residual(canonical(model), chunks_of(sig, torque, chunk))
-        else:
-            a_full = take(design(model, sig, torque))
-            active = np.asarray(model.active)
-            # np.compress copies the active columns several times faster than a[:, active]
-            a = a_full if active.all() else np.compress(active, a_full, axis=1)
-            resid = y - a_full @ np.asarray(model.coef)
-            del a_full
-    with phase("library"):
-        cands, spectra = build_library(
-            data.part_signals(sig),
-            take(torque),
-            resid,
-            model,
-            options=options.library,
-            extra_columns=extra_columns,
-            unidentified=unidentified,
-        )
-        if not cands:
-            return [], spectra, resid
-    if blocks is not None and folds is not None:
-        if chunk:
-            selected, owner, usable, stats = _chunked_scores(
-                cands, model, chunks_of(sig, torque, chunk), resid, blocks, options, phase
-            )
-        else:
-            selected, owner, usable, stats = _streamed_scores(
-                cands, sig, torque, a, y, resid, blocks, options, phase, take
-            )
-        with phase("twist CV"):
-            total, per_fold = fold_gains(stats, _fold_of_block(blocks, folds), options.n_folds)
-            gains = list(zip(total.tolist(), per_fold))
-            resampled = [fold_gains(stats, fb, options.n_folds)[0] for fb in resamples]
-    else:
-        with phase("library"):
-            cols = [take(candidate_columns(c.term, sig, torque)) for c in cands]
-        with phase("sindy"):
-            flat_cols, owner = [], []
-            for i, c in enumerate(cols):
-                for j in range(c.shape[1]):
-                    flat_cols.append(c[:, j])
-                    owner.append(i)
-            selected = sindy_select(
-                a, resid, flat_cols, [str(o) for o in owner], threshold=options.sindy_threshold
-            )
-            owner = np.asarray(owner)
-        with phase("twist CV"):
-            usable = [i for i, c in enumerate(cols) if _usable(c)]
-            groups = [cols[i] for i in usable]
-            basis = fold_basis(a, y, options.n_folds, options.block, tests=folds)
-            gains = cv_gains(basis, groups)
-            if len(resamples):
-                stats = block_grams(a, groups, y, blocks)
-                resampled = [cv_gains_by_blocks(stats, fb, options.n_folds) for fb in resamples]
-            else:
-                resampled = []
-    scored = [
-        (
-            cands[i],
-            gain,
-            folds_,
-            bool(selected[owner == i].any()),
-            np.asarray([r[j] for r in resampled]),
-        )
-        for j, (i, (gain, folds_)) in enumerate(zip(usable, gains))
-    ]
-    return scored, spectra, resid
-
-
-def _best_per_key(scored, min_gain):
-    """The best grid member of each key, with the key's stability: the share of resampled
-    fold assignments in which some member of the key removes at least `min_gain`."""
-    best, stable, members = {}, {}, {}
-    for cand, gain, folds, sel, res in scored:
-        hit = res >= min_gain if res.size else np.ones(1, bool) * (gain >= min_gain)
-        stable[cand.key] = stable.get(cand.key, np.zeros_like(hit)) | hit
-        members.setdefault(cand.key, []).append((gain, cand, folds))
-        if cand.key not in best or gain > best[cand.key][1]:
-            best[cand.key] = (cand, gain, folds, sel)
-    out = [
-        (*v, float(np.mean(stable[k])), sorted(members[k], key=lambda m: -m[0]))
-        for k, v in best.items()
-    ]
-    return sorted(out, key=lambda s: -s[1])
-
-
-def _parsimonious(trials, cv, blocks, options, notes):
-    """The trial to add: of those that lower the cross-validated torque error by
-    `min_torque_gain` and lie within one standard error of the lowest
-    ([`hdjax.discover._pipeline.within_one_se`][]), the one with the fewest columns (then the
-    lowest error). Cross-validated errors that the held-out blocks cannot tell apart do not
-    choose; the simpler effect is named, and a richer one must earn its columns."""
-    lowest = trials[0]
-    level = (1.0 - options.min_torque_gain) * cv.torque_rms
-    near = [
-        t
-        for t in trials
-        if t[0] <= level and (t is lowest or within_one_se(t[7], lowest[7], blocks))
-    ]
-    best = min(near, key=lambda t: (len(t[1].term.names()), t[0]))
-    if best is not lowest:
-        notes.append(
-            f"{best[1].key} ({best[0]:.4g} N·m) chosen over {lowest[1].key} ({lowest[0]:.4g} "
-            "N·m): within one standard error over the held-out blocks, with fewer columns"
-        )
-    return best
-
-
-VELOCITY_KEYS = ("skew:encoders", "viscous:omega_l", "viscous:omega_m")
-"""Keys whose columns are, to first order, the same speed: an encoder time skew and viscous
-friction (the twist cannot tell them apart; the current may)."""
-
-
-def _twist_per_speed(model: ComplianceModel, key: str) -> float:
-    """The twist [rad] per rad/s of link speed that the fitted term `key` adds."""
-    coef = np.asarray(model.coef)
-    i = model.n_coef - model.n_effect
-    for term in model.effect_terms:
-        m = len(term.names())
-        if term.key == key:
-            c = float(coef[i])
-            if key == "skew:encoders":
-                return c  # the coefficient is the delay: twist = delay * speed
-            per = c / term.scale
-            return per * model.ratio if term.signal == "omega_m" else per
-        i += m
-    return float("nan")
-
-
-def _velocity_reading(best, trials, data: PipelineData, notes: list[str], try_key=None):
-    """When the chosen trial is a speed term ([`VELOCITY_KEYS`][]), which reading the data
-    supports ([`hdjax.effects.velocity_reading`][]): its twist per speed, over the data's
-    compliance, against the current's own viscous slope. The chosen trial is swapped for the
-    other reading's (tried now through `try_key(key)` when it was not among the trials), and
-    the sentence is noted either way."""
-    key = best[1].key
-    if key not in VELOCITY_KEYS:
-        return best
-    model = best[5]
-    view = data.view()
-    # the model's own compliance where the speed is (weighted by the speed's square)
-    w = np.asarray(view.sig.omega_l) ** 2
-    seg = np.searchsorted(np.asarray(model.knots), view.torque, side="right")
-    k_local = np.asarray(model.k)[seg]
-    k = float(np.sum(w * k_local) / np.sum(w)) if np.sum(w) > 0 else float("nan")
-    per_speed = _twist_per_speed(model, key) / k if k else float("nan")
-    slope = current_viscous_slope(
-        np.asarray(view.sig.current), view.torque, np.asarray(view.sig.omega_l)
-    )
-    sentence = velocity_reading(per_speed, slope)
-    want = "skew:encoders" if sentence.startswith("skew") else "viscous:omega_l"
-    if slope is not None and key != want:
-        other = [t for t in trials if t[1].key == want]
-        if not other and try_key is not None:
-            other = [t for t in [try_key(want)] if t is not None]
-        if other:
-            notes.append(f"{want} chosen over {key}, which fits the same speed column: {sentence}")
-            return other[0]
-    notes.append(f"{key}: {sentence}")
-    return best
-
-
-def _eligible(ranked, options: DiscoverOptions):
-    """The shortlist of `_best_per_key`'s ranking: selected by the sparse regression,
-    removing at least `min_gain` of the cross-validated twist error on the standard folds, and
-    stable (doing so in at least `min_stability` of the resampled fold assignments)."""
-    return [
-        r for r in ranked if r[3] and r[1] >= options.min_gain and r[4] >= options.min_stability
-    ][: options.n_shortlist]
 
 
 def discover(
@@ -685,41 +280,22 @@ def _parts(train, test, joint, options, context, notes):
     return tr, te
 
 
-def _discover(train, test, joint, options, progress, context=None) -> Solution:
-    say = progress or (lambda _: None)
-    t_start = time.perf_counter()
-    if options.chunk and getattr(options.library, "dahl_initial", False):
-        # a state carried chunk by chunk starts at 0: over a long log its start hardly counts
-        options = dataclasses.replace(
-            options, library=dataclasses.replace(options.library, dahl_initial=False)
-        )
-    for rec, name in ((train, "TRAIN"), (test, "TEST")):
-        if rec.torque is None:
-            raise DataError(f"{name} ({rec.source}) has no 'torque' column; the loop needs it")
-    notes: list[str] = []
-    phase = Phases()
-    extra_columns = _usable_columns(train)
-    test_recording = test  # the record keeps TEST as given (figures, reports)
-    train, test = _parts(train, test, joint, options, context, notes)
-    with phase("baseline"):
-        model = baseline_model = calibrate_baseline(train, joint, options, notes)
-        # with a chunk, estimates run chunk by chunk too (see PipelineData.chunk)
-        data = dataclasses.replace(_as_data(model, train), chunk=options.chunk)
-        test_data = dataclasses.replace(_as_data(model, test), chunk=options.chunk)
-    n_gaps = int(data.starts.sum()) - 1
-    if n_gaps:
-        notes.append(
-            f"TRAIN has {n_gaps} gap(s) (time steps over 3 sample periods): {n_gaps + 1} "
-            "segments; memory states restart and derivatives stop at each gap"
-        )
-    with phase("test"):
-        base_metrics, base_est = _test_errors(model, test_data, joint.rated_torque)
-        base_twist = _twist_rms(model, test_data, chunk=options.chunk)
-    say(f"baseline: test torque RMS {base_metrics.rms:.4g} N·m, max {base_metrics.max:.4g} N·m")
-    # folds: whole contiguous blocks, no shorter than the residual's correlation length
-    with phase("baseline"):
-        est_train = estimate(model, data)
-        resid0 = data.part(_residual(model, data, None, options.chunk))
+class _Folds(NamedTuple):
+    """The cross-validation plan over TRAIN: its blocks and folds, as TRAIN's rows ("local")
+    and as the record's rows (for the torque CV), and the resampled deals."""
+
+    block: int
+    blocks: np.ndarray
+    folds: list
+    folds_rec: list
+    blocks_rec: np.ndarray
+    resamples: list
+
+
+def _fold_plan(data, test_data, resid0, options, notes):
+    """Whole contiguous blocks of TRAIN, no shorter than the residual's correlation length
+    (as long as TEST's runs when TEST is blocks of the same log), dealt to the folds; returns
+    `(plan, options)` with `n_folds` lowered when TRAIN holds fewer blocks."""
     minimum, per_fold = options.block, 2
     if test_data.rows is not None:
         # TEST is blocks of the same log: hold out blocks like TEST's, one per fold at least,
@@ -728,7 +304,6 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
     block, note = cv_block_length(resid0, data.part_starts, options.n_folds, minimum, per_fold)
     if note:
         notes.append(note)
-    # blocks and folds over TRAIN's rows ("local"); the record's rows for the torque CV
     blocks = contiguous_blocks(data.part_starts, block)
     n_folds = min(options.n_folds, int(blocks.max()) + 1)
     if n_folds != options.n_folds:
@@ -746,8 +321,128 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
     resamples = resampled_assignments(
         int(blocks.max()) + 1, options.n_folds, options.n_resamples, options.seed
     )
+    return _Folds(int(block), blocks, folds, folds_rec, blocks_rec, resamples), options
+
+
+def _ranking_rows(ranked: list[Ranked]) -> list[dict]:
+    """The report's ranking: the ten best keys and their scores."""
+    return [
+        dict(
+            key=r.candidate.key,
+            cv_gain=r.gain,
+            min_fold_gain=float(np.min(r.fold_gains)),
+            sindy=r.selected,
+            stability=r.stability,
+            origin=r.candidate.origin,
+        )
+        for r in ranked[:10]
+    ]
+
+
+def _trial(
+    model, cand, gain, folds_, stab, data, est_train, plan, cv, options, notes, phase
+) -> Trial:
+    """Calibrate `cand` into `model` and cross-validate the whole pipeline per fold; raises
+    `CalibrationError` or `InversionError` when it cannot."""
+    with phase("calibrate"):
+        new_model, new_est = calibrate(
+            model.with_effects(cand.term), data, notes, est_train, options.chunk
+        )
     with phase("torque CV"):
-        cv = cross_validate(model, data, folds_rec, chunk=options.chunk)
+        new_cv = cross_validate(new_model, data, plan.folds_rec, cv, options.chunk)
+    return Trial(cand, gain, folds_, stab, new_model, new_est, new_cv)
+
+
+def _shortlist_trials(shortlist, ranking, try_one, notes, options) -> list[Trial]:
+    """Per shortlisted key, the best grid member (of the first `n_grid_tries`) that
+    calibrates to an invertible model (a hysteresis scale too sharp for its amplitude does
+    not); its cross-validated torque RMS goes into the `ranking` rows."""
+    trials = []
+    for r in shortlist:
+        for gain, cand, folds_ in r.members[: options.n_grid_tries]:
+            if gain < options.min_gain:
+                break
+            try:
+                trial = try_one(cand, gain, folds_, r.stability)
+            except (CalibrationError, InversionError) as err:
+                notes.append(f"candidate {cand.key} could not be added: {err}")
+                continue
+            for row in ranking:
+                if row["key"] == cand.key:
+                    row["cv_torque_rms"] = trial.cv_rms
+            trials.append(trial)
+            break
+    return trials
+
+
+def _no_step_note(trials, shortlist, cv, options) -> str:
+    """Why no candidate was added."""
+    if shortlist and not trials:
+        return (
+            "stopped: the eligible candidates ("
+            + ", ".join(r.candidate.key for r in shortlist)
+            + ") could not be calibrated to an invertible model"
+        )
+    if not trials:
+        return (
+            "stopped: no candidate selected by the sparse regression removes at least "
+            f"{options.min_gain:.0%} of the cross-validated twist error in at least "
+            f"{options.min_stability:.0%} of {options.n_resamples} resampled fold assignments"
+        )
+    tried = ", ".join(f"{t.key} {t.cv_rms:.4g} N·m" for t in sorted(trials, key=lambda t: t.cv_rms))
+    return (
+        f"stopped: no candidate lowers the cross-validated torque error "
+        f"({cv.torque_rms:.4g} N·m) by {options.min_torque_gain:.0%} (tried: {tried})"
+    )
+
+
+def _start(train, test, joint, options, phase, notes, say):
+    """The starting model calibrated on TRAIN, its errors on TEST, its TRAIN estimate and
+    twist residual (on TRAIN's rows)."""
+    with phase("baseline"):
+        model = calibrate_baseline(train, joint, options, notes)
+        # with a chunk, estimates run chunk by chunk too (see PipelineData.chunk)
+        data = dataclasses.replace(_as_data(model, train), chunk=options.chunk)
+        test_data = dataclasses.replace(_as_data(model, test), chunk=options.chunk)
+    n_gaps = int(data.starts.sum()) - 1
+    if n_gaps:
+        notes.append(
+            f"TRAIN has {n_gaps} gap(s) (time steps over 3 sample periods): {n_gaps + 1} "
+            "segments; memory states restart and derivatives stop at each gap"
+        )
+    with phase("test"):
+        base_metrics, base_est = _test_errors(model, test_data, joint.rated_torque)
+        base_twist = _twist_rms(model, test_data, chunk=options.chunk)
+    say(f"baseline: test torque RMS {base_metrics.rms:.4g} N·m, max {base_metrics.max:.4g} N·m")
+    with phase("baseline"):
+        est_train = estimate(model, data)
+        resid0 = data.part(_residual(model, data, None, options.chunk))
+    return model, data, test_data, base_metrics, base_est, base_twist, est_train, resid0
+
+
+def _discover(train, test, joint, options, progress, context=None) -> Solution:
+    say = progress or (lambda _: None)
+    t_start = time.perf_counter()
+    if options.chunk and getattr(options.library, "dahl_initial", False):
+        # a state carried chunk by chunk starts at 0: over a long log its start hardly counts
+        options = dataclasses.replace(
+            options, library=dataclasses.replace(options.library, dahl_initial=False)
+        )
+    for rec, name in ((train, "TRAIN"), (test, "TEST")):
+        if rec.torque is None:
+            raise DataError(f"{name} ({rec.source}) has no 'torque' column; the loop needs it")
+    notes: list[str] = []
+    phase = Phases()
+    extra_columns = _usable_columns(train)
+    test_recording = test  # the record keeps TEST as given (figures, reports)
+    train, test = _parts(train, test, joint, options, context, notes)
+    model, data, test_data, base_metrics, base_est, base_twist, est_train, resid0 = _start(
+        train, test, joint, options, phase, notes, say
+    )
+    baseline_model = model
+    plan, options = _fold_plan(data, test_data, resid0, options, notes)
+    with phase("torque CV"):
+        cv = cross_validate(model, data, plan.folds_rec, chunk=options.chunk)
     base_cv = cv
     say(f"baseline: cross-validated torque RMS {cv.torque_rms:.4g} N·m on TRAIN")
     if not np.isfinite(cv.torque_rms):
@@ -755,209 +450,28 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
             "cross-validation scores no held-out sample: every fold holds out torques outside "
             "the range its training part calibrates, so no effect can be judged and none is added"
         )
-    steps: list[DiscoveryStep] = []
     unidentified: list[str] = []
-    excluded: set[str] = set()
-    ranking: list[dict] = []
-    spectra: dict = {}
-    resid = None
-    while True:
-        scored, spectra, resid = score_candidates(
-            model,
-            data,
-            options,
-            extra_columns,
-            folds=folds,
-            blocks=blocks,
-            resamples=resamples,
-            est=est_train,
-            phases=phase,
-            unidentified=unidentified,
-        )
-        ranked = _best_per_key([s for s in scored if s[0].key not in excluded], options.min_gain)
-        ranking = [
-            dict(
-                key=c.key,
-                cv_gain=g,
-                min_fold_gain=float(np.min(f)),
-                sindy=s,
-                stability=st,
-                origin=c.origin,
-            )
-            for c, g, f, s, st, _ in ranked[:10]
-        ]
-        if len(steps) >= options.max_effects:
-            notes.append(f"stopped: reached max_effects = {options.max_effects}")
-            break
-        eligible = _eligible(ranked, options)
-        trials = []
-        for _, _, _, _, stab, members in eligible:
-            # the best grid member that calibrates to an invertible model (a hysteresis scale
-            # too sharp for its amplitude is not)
-            for gain, cand, folds_ in members[: options.n_grid_tries]:
-                if gain < options.min_gain:
-                    break
-                try:
-                    with phase("calibrate"):
-                        new_model, new_est = calibrate(
-                            model.with_effects(cand.term), data, notes, est_train, options.chunk
-                        )
-                    with phase("torque CV"):
-                        new_cv = cross_validate(new_model, data, folds_rec, cv, options.chunk)
-                except (CalibrationError, InversionError) as err:
-                    notes.append(f"candidate {cand.key} could not be added: {err}")
-                    continue
-                for r in ranking:
-                    if r["key"] == cand.key:
-                        r["cv_torque_rms"] = new_cv.torque_rms
-                trials.append(
-                    (new_cv.torque_rms, cand, gain, folds_, stab, new_model, new_est, new_cv)
-                )
-                break
-        if not trials and eligible:
-            notes.append(
-                "stopped: the eligible candidates ("
-                + ", ".join(r[0].key for r in eligible)
-                + ") could not be calibrated to an invertible model"
-            )
-            break
-        if not trials:
-            notes.append(
-                "stopped: no candidate selected by the sparse regression removes at least "
-                f"{options.min_gain:.0%} of the cross-validated twist error in at least "
-                f"{options.min_stability:.0%} of {options.n_resamples} resampled fold assignments"
-            )
-            break
-        trials.sort(key=lambda x: x[0])
-        if not trials[0][0] <= (1.0 - options.min_torque_gain) * cv.torque_rms:
-            tried = ", ".join(f"{t[1].key} {t[0]:.4g} N·m" for t in trials)
-            notes.append(
-                f"stopped: no candidate lowers the cross-validated torque error "
-                f"({cv.torque_rms:.4g} N·m) by {options.min_torque_gain:.0%} (tried: {tried})"
-            )
-            break
-        best = _parsimonious(trials, cv, blocks_rec, options, notes)
-
-        def _try_key(key, ranked=ranked):
-            # the reading's own candidate, when the shortlist did not try it
-            for *_, stab, members in (r for r in ranked if r[0].key == key):
-                gain, cand, folds_ = members[0]
-                try:
-                    new_model, new_est = calibrate(
-                        model.with_effects(cand.term), data, notes, est_train, options.chunk
-                    )
-                    new_cv = cross_validate(new_model, data, folds_rec, cv, options.chunk)
-                except (CalibrationError, InversionError):
-                    return None
-                if not new_cv.torque_rms <= (1.0 - options.min_torque_gain) * cv.torque_rms:
-                    return None  # it must pass the test the chosen trial passed
-                return (new_cv.torque_rms, cand, gain, folds_, stab, new_model, new_est, new_cv)
-            return None
-
-        best = _velocity_reading(best, trials, data, notes, _try_key)
-        _, cand, gain, folds_, stab, new_model, new_est, new_cv = best
-        with phase("aliases"):
-            # on the signals the candidates were scored on (the model before this step)
-            others = [(r[0].key, r[0].term) for r in ranked[:10] if r[0].key != cand.key]
-            aliases = find_aliases(
-                cand.term, others, *training_data(model, data, est_train), take=data.part
-            )
-        with phase("test"):
-            metrics, est = _test_errors(new_model, test_data, joint.rated_torque)
-            twist_rms = _twist_rms(new_model, test_data, chunk=options.chunk)
-        model, est_train, cv = new_model, new_est, new_cv
-        steps.append(
-            DiscoveryStep(
-                key=cand.key,
-                family=cand.family,
-                term=cand.term,
-                model=model,
-                torque_estimate=est,
-                fold_gains=[float(x) for x in folds_],
-                test=metrics,
-                twist_rms_arcsec=twist_rms,
-                cv_gain=gain,
-                cv_torque_rms=new_cv.torque_rms,
-                cv_twist_rms_arcsec=new_cv.twist_rms_arcsec,
-                stability=stab,
-                ranking=ranking,
-                spectra=spectra,
-                aliases=aliases,
-            )
-        )
-        say(
-            f"step {len(steps)}: added {cand.key} (CV twist gain {gain:.1%}, stability "
-            f"{stab:.0%}, CV torque {new_cv.torque_rms:.4g} N·m); test torque RMS "
-            f"{metrics.rms:.4g} N·m, max {metrics.max:.4g} N·m"
-            + (
-                "; TRAIN cannot tell it apart from " + ", ".join(a["key"] for a in aliases)
-                if aliases
-                else ""
-            )
-        )
-        before = steps[-2].test.rms if len(steps) > 1 else base_metrics.rms
-        if metrics.rms > before:
-            # TEST never chooses, so a step it disagrees with stays: say so, loudly
-            rise = (
-                f"warning: step {len(steps)} ({cand.key}) raised the TEST torque RMS from "
-                f"{before:.4g} to {metrics.rms:.4g} N·m (+{metrics.rms / before - 1:.1%}), "
-                "although cross-validation on TRAIN lowered the torque error: TRAIN and TEST differ"
-            )
-            notes.append(rise)
-            say(rise)
-    # amplitudes with intervals, and what is left
-    intervals = []
+    steps, model, est_train, cv, spectra, resid, ranking = _add_effects(
+        model,
+        data,
+        test_data,
+        est_train,
+        cv,
+        plan,
+        options,
+        extra_columns,
+        joint,
+        base_metrics,
+        phase,
+        say,
+        notes,
+        unidentified,
+    )
     with phase("intervals"):
-        if steps:
-            sig_d, torque = data.pair(est_train)
-            if options.chunk:
-                chunks = chunks_of(sig_d, torque, options.chunk)
-                res_final = twist_residual(canonical(model), chunks)
-                length = bootstrap_length(res_final, data.starts)
-                inst = chunks_of(sig_d, instrument_torque(torque, data.starts), options.chunk)
-                intervals = effect_intervals(
-                    model, None, data, est_train, length=length, chunks=chunks, instruments=inst
-                )
-            else:
-                # designs on the whole record (memory states), statistics on TRAIN's rows
-                view = data.view()
-                a_final = data.part(design(model, sig_d, torque))
-                res_final = view.twist - a_final @ np.asarray(model.coef)
-                length = bootstrap_length(res_final, view.starts)
-                inst = np.full(data.n, np.nan)
-                inst[data.rows if data.rows is not None else slice(None)] = instrument_torque(
-                    view.torque, view.starts
-                )
-                z = data.part(design(model, sig_d, inst))
-                intervals = effect_intervals(
-                    model, a_final, view, data.part(est_train), length=length, instruments=z
-                )
-                del a_final, z
-            for s_, iv in zip(steps, intervals):
-                s_.amplitude = iv
+        for s_, iv in zip(steps, _intervals(model, data, est_train, options) if steps else []):
+            s_.amplitude = iv
     with phase("unexplained"):
-        view = data.view()
-        corr = correlation_length(resid, view.starts) if resid is not None else 1
-        angles = {s: np.asarray(view.sig.get(s)) for s in ("theta_m", "theta_l")}
-        left = unexplained_structure(
-            resid if resid is not None else view.twist * 0.0,
-            spectra
-            if resid is None
-            else all_spectra(
-                resid,
-                angles,
-                {"theta_m": options.library.orders_m, "theta_l": options.library.orders_l},
-                spectra,
-            ),
-            {
-                "torque": view.torque,
-                "omega_m": np.asarray(view.sig.omega_m),
-                "omega_l": np.asarray(view.sig.omega_l),
-            },
-            correlation_length=corr,
-            starts=view.starts,
-            angles=angles,
-        )
+        left = _unexplained(resid, spectra, data, options)
     notes += list(dict.fromkeys(unidentified))
     final = steps[-1].test if steps else base_metrics
     with phase("reference"):
@@ -970,22 +484,7 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
                     say(f"reference ({part}): {f['message']}")
     say(phase.line())
     ratio = cv.torque_rms / final.rms if final.rms > 0 else float("nan")
-    if np.isfinite(ratio) and not 0.5 <= ratio <= 2.0:
-        notes.append(
-            f"cross-validation does not represent TEST: the final cross-validated torque RMS "
-            f"({cv.torque_rms:.4g} N·m) is {ratio:.2g} times the TEST RMS ({final.rms:.4g} N·m), "
-            "so the held-out blocks of TRAIN ask for "
-            + ("more extrapolation than TEST does" if ratio > 1 else "less than TEST does")
-            + "; the loop's choices rest on TRAIN's folds, and the TEST figure is what to trust"
-        )
-    if final.rms > base_metrics.rms:
-        # TEST never chooses, so it can disagree with cross-validation: say so, loudly
-        notes.append(
-            f"warning: on TEST the final model's torque RMS ({final.rms:.4g} N·m) is "
-            f"{final.rms / base_metrics.rms - 1:.1%} above the starting model's "
-            f"({base_metrics.rms:.4g} N·m), although cross-validation on TRAIN lowered it from "
-            f"{base_cv.torque_rms:.4g} to {cv.torque_rms:.4g} N·m: TRAIN and TEST differ"
-        )
+    notes += _closing_notes(ratio, cv, base_cv, final, base_metrics)
     record = DiscoveryRecord(
         baseline_model=baseline_model,
         baseline=base_metrics,
@@ -1001,9 +500,10 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
         notes=list(dict.fromkeys(notes)),
         test=test_recording,
         unexplained=left,
-        cv_block_samples=int(block),
+        cv_block_samples=plan.block,
         reference_checks=checks,
         cv_test_ratio=float(ratio),
+        stopping_rule=stopping_rule(options),
     )
     stats = dict(
         n_effects=len(steps),
@@ -1011,10 +511,222 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
         final_test_rms=final.rms,
         baseline_cv_torque_rms=base_cv.torque_rms,
         final_cv_torque_rms=cv.torque_rms,
-        cv_block_samples=block,
+        cv_block_samples=plan.block,
         fit_time_s=time.perf_counter() - t_start,
     )
     return Solution(model, RESULTS.successful, stats, aux=record)
+
+
+def _add_effects(
+    model,
+    data,
+    test_data,
+    est_train,
+    cv,
+    plan,
+    options,
+    extra_columns,
+    joint,
+    base_metrics,
+    phase,
+    say,
+    notes,
+    unidentified,
+):
+    """The loop proper: score the library, shortlist, try, choose and add one effect per
+    step until the stopping rule ([`hdjax.discover._decision.choose`][]) or `max_effects`
+    stops it.
+
+    **Returns:** `(steps, model, TRAIN estimate, cross-validation, spectra, residual,
+    ranking)` after the last step.
+    """
+    steps: list[DiscoveryStep] = []
+    while True:
+        scored, spectra, resid = score_candidates(
+            model,
+            data,
+            options,
+            extra_columns,
+            folds=plan.folds,
+            blocks=plan.blocks,
+            resamples=plan.resamples,
+            est=est_train,
+            phases=phase,
+            unidentified=unidentified,
+        )
+        ranked = rank(scored, options.min_gain)
+        ranking = _ranking_rows(ranked)
+        if len(steps) >= options.max_effects:
+            notes.append(f"stopped: reached max_effects = {options.max_effects}")
+            break
+
+        def try_one(cand, gain, folds_, stab, phase=phase, model=model, est=est_train, cv=cv):
+            return _trial(
+                model, cand, gain, folds_, stab, data, est, plan, cv, options, notes, phase
+            )
+
+        def try_key(key, ranked=ranked, try_one=try_one, cv=cv):
+            # the reading's own candidate, when the shortlist did not try it: its best member,
+            # which must pass the test the chosen trial passed
+            for r in (r for r in ranked if r.candidate.key == key):
+                try:
+                    gain, cand, folds_ = r.members[0]
+                    trial = try_one(cand, gain, folds_, r.stability, null_phases())
+                except (CalibrationError, InversionError):
+                    return None
+                return trial if qualifies(trial.cv_rms, cv.torque_rms, options) else None
+            return None
+
+        shortlist = eligible(ranked, options)
+        trials = _shortlist_trials(shortlist, ranking, try_one, notes, options)
+        best = choose(trials, cv, plan.blocks_rec, options, notes)
+        if best is None:
+            notes.append(_no_step_note(trials, shortlist, cv, options))
+            break
+        best = speed_reading(best, trials, data, notes, try_key)
+        step = _step(
+            best, model, data, est_train, test_data, ranked, ranking, spectra, joint, options, phase
+        )
+        model, est_train, cv = best.model, best.estimate, best.cv
+        steps.append(step)
+        _say_step(steps, base_metrics, say, notes)
+    return steps, model, est_train, cv, spectra, resid, ranking
+
+
+def _step(
+    best, model, data, est_train, test_data, ranked, ranking, spectra, joint, options, phase
+) -> DiscoveryStep:
+    """The step that adds `best` to `model`: its aliases (on the signals the candidates were
+    scored on, the model before this step) and its TEST errors."""
+    cand = best.candidate
+    with phase("aliases"):
+        others = [
+            (r.candidate.key, r.candidate.term) for r in ranked[:10] if r.candidate.key != cand.key
+        ]
+        aliases = find_aliases(
+            cand.term, others, *training_data(model, data, est_train), take=data.part
+        )
+    with phase("test"):
+        metrics, est = _test_errors(best.model, test_data, joint.rated_torque)
+        twist_rms = _twist_rms(best.model, test_data, chunk=options.chunk)
+    return DiscoveryStep(
+        key=cand.key,
+        family=cand.family,
+        term=cand.term,
+        model=best.model,
+        torque_estimate=est,
+        fold_gains=[float(x) for x in best.fold_gains],
+        test=metrics,
+        twist_rms_arcsec=twist_rms,
+        cv_gain=best.gain,
+        cv_torque_rms=best.cv.torque_rms,
+        cv_twist_rms_arcsec=best.cv.twist_rms_arcsec,
+        stability=best.stability,
+        ranking=ranking,
+        spectra=spectra,
+        aliases=aliases,
+    )
+
+
+def _say_step(steps, base_metrics, say, notes) -> None:
+    """The progress line of the last step; a loud warning when TEST disagrees with it."""
+    s = steps[-1]
+    say(
+        f"step {len(steps)}: added {s.key} (CV twist gain {s.cv_gain:.1%}, stability "
+        f"{s.stability:.0%}, CV torque {s.cv_torque_rms:.4g} N·m); test torque RMS "
+        f"{s.test.rms:.4g} N·m, max {s.test.max:.4g} N·m"
+        + (
+            "; TRAIN cannot tell it apart from " + ", ".join(a["key"] for a in s.aliases)
+            if s.aliases
+            else ""
+        )
+    )
+    before = steps[-2].test.rms if len(steps) > 1 else base_metrics.rms
+    if s.test.rms > before:
+        # TEST never chooses, so a step it disagrees with stays: say so, loudly
+        rise = (
+            f"warning: step {len(steps)} ({s.key}) raised the TEST torque RMS from "
+            f"{before:.4g} to {s.test.rms:.4g} N·m (+{s.test.rms / before - 1:.1%}), "
+            "although cross-validation on TRAIN lowered the torque error: TRAIN and TEST differ"
+        )
+        notes.append(rise)
+        say(rise)
+
+
+def _intervals(model, data, est_train, options) -> list:
+    """Every added effect's amplitude with its 95 % moving-block bootstrap interval over
+    TRAIN ([`hdjax.discover._uncertainty.effect_intervals`][])."""
+    sig_d, torque = data.pair(est_train)
+    if options.chunk:
+        chunks = chunks_of(sig_d, torque, options.chunk)
+        res_final = twist_residual(canonical(model), chunks)
+        length = bootstrap_length(res_final, data.starts)
+        inst = chunks_of(sig_d, instrument_torque(torque, data.starts), options.chunk)
+        return effect_intervals(
+            model, None, data, est_train, length=length, chunks=chunks, instruments=inst
+        )
+    # designs on the whole record (memory states), statistics on TRAIN's rows
+    view = data.view()
+    a_final = data.part(design(model, sig_d, torque))
+    res_final = view.twist - a_final @ np.asarray(model.coef)
+    length = bootstrap_length(res_final, view.starts)
+    inst = np.full(data.n, np.nan)
+    inst[data.rows if data.rows is not None else slice(None)] = instrument_torque(
+        view.torque, view.starts
+    )
+    z = data.part(design(model, sig_d, inst))
+    return effect_intervals(
+        model, a_final, view, data.part(est_train), length=length, instruments=z
+    )
+
+
+def _unexplained(resid, spectra, data, options) -> list:
+    """Structure the final model leaves above the noise in the TRAIN residual
+    ([`hdjax.discover._unexplained.unexplained_structure`][])."""
+    view = data.view()
+    corr = correlation_length(resid, view.starts) if resid is not None else 1
+    angles = {s: np.asarray(view.sig.get(s)) for s in ("theta_m", "theta_l")}
+    return unexplained_structure(
+        resid if resid is not None else view.twist * 0.0,
+        spectra
+        if resid is None
+        else all_spectra(
+            resid,
+            angles,
+            {"theta_m": options.library.orders_m, "theta_l": options.library.orders_l},
+            spectra,
+        ),
+        {
+            "torque": view.torque,
+            "omega_m": np.asarray(view.sig.omega_m),
+            "omega_l": np.asarray(view.sig.omega_l),
+        },
+        correlation_length=corr,
+        starts=view.starts,
+        angles=angles,
+    )
+
+
+def _closing_notes(ratio, cv, base_cv, final, base_metrics) -> list[str]:
+    """Loud notes on the final result: cross-validation far from TEST, or TEST worse than
+    the start (TEST never chooses, so it can disagree with cross-validation)."""
+    notes = []
+    if np.isfinite(ratio) and not 0.5 <= ratio <= 2.0:
+        notes.append(
+            f"cross-validation does not represent TEST: the final cross-validated torque RMS "
+            f"({cv.torque_rms:.4g} N·m) is {ratio:.2g} times the TEST RMS ({final.rms:.4g} N·m), "
+            "so the held-out blocks of TRAIN ask for "
+            + ("more extrapolation than TEST does" if ratio > 1 else "less than TEST does")
+            + "; the loop's choices rest on TRAIN's folds, and the TEST figure is what to trust"
+        )
+    if final.rms > base_metrics.rms:
+        notes.append(
+            f"warning: on TEST the final model's torque RMS ({final.rms:.4g} N·m) is "
+            f"{final.rms / base_metrics.rms - 1:.1%} above the starting model's "
+            f"({base_metrics.rms:.4g} N·m), although cross-validation on TRAIN lowered it from "
+            f"{base_cv.torque_rms:.4g} to {cv.torque_rms:.4g} N·m: TRAIN and TEST differ"
+        )
+    return notes
 
 
 def _reference_findings(model, data, est_train, test_data, est_test) -> dict:

@@ -1,11 +1,8 @@
-"""The discover report: `report.json`, figures and `report.md`, written atomically."""
+"""The discover report: `report.json`, `report.md` and figures, written into a result folder
+([`hdjax.report.ResultDir`][]) with the JSON encoder of every hdjax result."""
 
 from __future__ import annotations
 
-import json
-import os
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -17,18 +14,10 @@ from .._features import find_gaps
 from .._plotting import fixed_margins, pyplot
 from .._solution import Solution
 from ..compliance._lstsq import CalibrationData
+from ..report import ResultDir
 from ._loop import ARCSEC, DiscoveryRecord, residual_spectra
+from ._options import DiscoverOptions, stopping_rule
 from ._pipeline import PipelineData, design, pipeline_signals
-
-STOPPING_RULE = (
-    "a candidate is eligible when pysindy STLSQ selects it and it removes at least min_gain of "
-    "the model's cross-validated twist error (5 folds of whole contiguous blocks of TRAIN) in "
-    "the standard fold assignment and in at least min_stability of the resampled ones; of the "
-    "best eligible candidates, those that lower the cross-validated torque error (whole "
-    "pipeline per fold: calibration, then inversion) by at least min_torque_gain qualify, and "
-    "the lowest is added, or one with fewer columns within one standard error of it (paired "
-    "over the held-out blocks); stop when none qualifies"
-)
 
 
 def report_dict(solution: Solution, *, extra: dict | None = None) -> dict:
@@ -69,7 +58,7 @@ def report_dict(solution: Solution, *, extra: dict | None = None) -> dict:
         "final": {"rms": f.rms, "max": f.max, "rms_pct": f.rms_pct, "max_pct": f.max_pct},
         "effects": result.effects,
         "vocabulary": effects.vocabulary(),
-        "stopping_rule": STOPPING_RULE,
+        "stopping_rule": result.stopping_rule or stopping_rule(DiscoverOptions()),
         "last_ranking": result.final_ranking,
         "unexplained": result.unexplained,
         "cv_block_samples": result.cv_block_samples,
@@ -303,36 +292,30 @@ def write_report(
     train: CalibrationData | None = None,
     figures: bool = True,
     extra: dict[str, Any] | None = None,
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Write `report.json`, `report.md` and `figures/` of a [`hdjax.discover.discover`][]
-    solution into `out`, atomically.
+    solution into the result folder `out`, atomically, by the rules of every hdjax result
+    folder ([`hdjax.report.ResultDir`][]: `out` absent or empty, or an earlier hdjax result
+    with `overwrite`); returns the report dict."""
+    with ResultDir(out, overwrite=overwrite, command="discover") as rd:
+        return write_report_into(rd, solution, train=train, figures=figures, extra=extra)
 
-    Everything is written into a temporary folder beside `out` first; `out` (which must be
-    absent or empty) receives the files only when all of them exist, `report.json` last.
-    """
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
+
+def write_report_into(
+    rd: ResultDir,
+    solution: Solution,
+    *,
+    train: CalibrationData | None = None,
+    figures: bool = True,
+    extra: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """[`write_report`][] into an open [`hdjax.report.ResultDir`][] (the command line's):
+    the report first, then the figures in one pass, `report.md` naming them last."""
     d = report_dict(solution, extra=extra)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
-        figs = write_figures(solution, train, tmp / "figures") if figures else []
-        (tmp / "report.md").write_text(report_markdown(d, figs))
-        (tmp / "report.json").write_text(json.dumps(d, indent=2, default=_json_default))
-        out.mkdir(exist_ok=True)
-        if (tmp / "figures").exists():
-            if (out / "figures").exists():
-                shutil.rmtree(out / "figures")
-            os.replace(tmp / "figures", out / "figures")
-        os.replace(tmp / "report.md", out / "report.md")
-        os.replace(tmp / "report.json", out / "report.json")
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    rd.write_json("report.json", d)
+    rd.write_text("report.md", report_markdown(d, []))
+    if figures:
+        figs = write_figures(solution, train, rd.path("figures/.keep").parent)
+        rd.write_text("report.md", report_markdown(d, figs))
     return d
-
-
-def _json_default(x):
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    return str(x)

@@ -20,6 +20,7 @@ import scipy.linalg
 
 from .._custom_types import ArrayLike, Bool, Float, Int
 from .._lazy import pysindy
+from ._gram import gram_solve
 
 MAX_SINDY_ROWS = 20000
 
@@ -193,14 +194,6 @@ def block_grams(a: np.ndarray, groups: list[np.ndarray], y: np.ndarray, blocks: 
     return grams, a.shape[1], bounds
 
 
-def _solve_gram(g, rhs):
-    try:
-        c = np.linalg.cholesky(g)
-    except np.linalg.LinAlgError:
-        return np.linalg.lstsq(g, rhs, rcond=1e-12)[0]
-    return scipy.linalg.cho_solve((c, True), rhs, check_finite=False)
-
-
 def cv_gains_by_blocks(stats, fold_of_block: np.ndarray, n_folds: int) -> np.ndarray:
     """Cross-validated gain of every group for one assignment of blocks to folds.
 
@@ -222,7 +215,7 @@ def cv_gains_by_blocks(stats, fold_of_block: np.ndarray, n_folds: int) -> np.nda
         base = np.flatnonzero(np.diag(g_tr)[:p] > 1e-14)
 
         def test_sse(idx):
-            theta = _solve_gram(g_tr[np.ix_(idx, idx)], g_tr[idx, yi])
+            theta = gram_solve(g_tr[np.ix_(idx, idx)], g_tr[idx, yi])
             return g_te[yi, yi] - 2 * theta @ g_te[idx, yi] + theta @ g_te[np.ix_(idx, idx)] @ theta
 
         base_sse += test_sse(base)

@@ -21,6 +21,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import jax
+import numpy as np
 
 # `_io.atomic_write_bytes` is looked up at each call, so that a test can stand a full disk in
 from .. import __version__, _io
@@ -31,11 +32,18 @@ from ._outputs import MARKER, check_not_input, check_output_dir, marker_bytes, r
 
 
 def _clean(obj):
-    """JSON-ready copy: NaN/inf become `null`, tuples lists, numpy scalars floats."""
+    """JSON-ready copy: NaN/inf become `null`, tuples and arrays lists, numpy scalars floats
+    (booleans stay booleans)."""
     if isinstance(obj, dict):
         return {str(k): _clean(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
         return [_clean(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _clean(obj.tolist())
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, np.integer):
+        return int(obj)
     if isinstance(obj, bool) or obj is None or isinstance(obj, str):
         return obj
     if isinstance(obj, int):

@@ -1,0 +1,211 @@
+"""The loop's decision: which scored candidates are eligible, which trial is added, and when
+the loop stops (the rule in words: [`hdjax.discover._options.stopping_rule`][]).
+
+Records, not tuples, travel between the stages:
+
+- [`Scored`][]: a candidate's cross-validated twist gain on the standard folds and on every
+  resampled fold assignment ([`hdjax.discover._loop.score_candidates`][]);
+- [`Ranked`][]: the best grid member of one key, with the key's stability;
+- [`Trial`][]: a shortlisted candidate calibrated into the model and cross-validated in the
+  torque domain.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ..compliance import ComplianceModel
+from ..effects import current_viscous_slope, velocity_reading
+from ._options import DiscoverOptions
+from ._pipeline import CrossValidation, PipelineData, within_one_se
+
+
+class Scored(NamedTuple):
+    """One candidate's scores in one step."""
+
+    candidate: Any
+    gain: float
+    """The share of the cross-validated twist error it removes (standard folds)."""
+    fold_gains: np.ndarray
+    selected: bool
+    """Whether pysindy's STLSQ keeps one of its columns."""
+    resampled: np.ndarray
+    """Its gains over the resampled fold assignments."""
+
+
+class Ranked(NamedTuple):
+    """The best grid member of a key, with the key's stability and all its members."""
+
+    candidate: Any
+    gain: float
+    fold_gains: np.ndarray
+    selected: bool
+    stability: float
+    """The share of resampled fold assignments in which some member removes `min_gain`."""
+    members: list[tuple[float, Any, np.ndarray]]
+    """`(gain, candidate, fold gains)` of every grid member of the key, best first."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Trial:
+    """A shortlisted candidate, calibrated into the model and cross-validated in the torque
+    domain (whole pipeline per fold)."""
+
+    candidate: Any
+    gain: float
+    fold_gains: np.ndarray
+    stability: float
+    model: ComplianceModel | None
+    estimate: np.ndarray | None
+    cv: CrossValidation
+
+    @property
+    def cv_rms(self) -> float:
+        """The cross-validated torque RMS [N·m] with the candidate added."""
+        return self.cv.torque_rms
+
+    @property
+    def key(self) -> str:
+        return self.candidate.key
+
+
+def rank(scored: list[Scored], min_gain: float) -> list[Ranked]:
+    """The best grid member of each key, best gain first, with the key's stability: the share
+    of resampled fold assignments in which some member of the key removes at least
+    `min_gain`."""
+    best, stable, members = {}, {}, {}
+    for s in scored:
+        key = s.candidate.key
+        res = s.resampled
+        hit = res >= min_gain if res.size else np.ones(1, bool) * (s.gain >= min_gain)
+        stable[key] = stable.get(key, np.zeros_like(hit)) | hit
+        members.setdefault(key, []).append((s.gain, s.candidate, s.fold_gains))
+        if key not in best or s.gain > best[key].gain:
+            best[key] = s
+    out = [
+        Ranked(
+            s.candidate,
+            s.gain,
+            s.fold_gains,
+            s.selected,
+            float(np.mean(stable[k])),
+            sorted(members[k], key=lambda m: -m[0]),
+        )
+        for k, s in best.items()
+    ]
+    return sorted(out, key=lambda r: -r.gain)
+
+
+def eligible(ranked: list[Ranked], options: DiscoverOptions) -> list[Ranked]:
+    """The shortlist of [`rank`][]'s ranking: selected by the sparse regression, removing at
+    least `min_gain` of the cross-validated twist error on the standard folds, and stable
+    (doing so in at least `min_stability` of the resampled fold assignments)."""
+    return [
+        r
+        for r in ranked
+        if r.selected and r.gain >= options.min_gain and r.stability >= options.min_stability
+    ][: options.n_shortlist]
+
+
+def qualifies(cv_rms: float, current_rms: float, options: DiscoverOptions) -> bool:
+    """Whether a cross-validated torque RMS lowers the current one by `min_torque_gain` (the
+    acceptance test of every trial, written once)."""
+    return bool(cv_rms <= (1.0 - options.min_torque_gain) * current_rms)
+
+
+def choose(
+    trials: list[Trial],
+    current: CrossValidation,
+    blocks: np.ndarray,
+    options: DiscoverOptions,
+    notes: list[str],
+) -> Trial | None:
+    """The trial to add, or `None` (then the loop stops) when none [`qualifies`][].
+
+    Of the trials that qualify and lie within one standard error of the lowest
+    ([`hdjax.discover._pipeline.within_one_se`][], paired over the held-out `blocks`), the one
+    with the fewest columns (then the lowest error): cross-validated errors the held-out
+    blocks cannot tell apart do not choose; the simpler effect is named, and a richer one must
+    earn its columns.
+    """
+    trials = sorted(trials, key=lambda t: t.cv_rms)
+    if not trials or not qualifies(trials[0].cv_rms, current.torque_rms, options):
+        return None
+    lowest = trials[0]
+    near = [
+        t
+        for t in trials
+        if qualifies(t.cv_rms, current.torque_rms, options)
+        and (t is lowest or within_one_se(t.cv, lowest.cv, blocks))
+    ]
+    best = min(near, key=lambda t: (len(t.candidate.term.names()), t.cv_rms))
+    if best is not lowest:
+        notes.append(
+            f"{best.key} ({best.cv_rms:.4g} N·m) chosen over {lowest.key} ({lowest.cv_rms:.4g} "
+            "N·m): within one standard error over the held-out blocks, with fewer columns"
+        )
+    return best
+
+
+VELOCITY_KEYS = ("skew:encoders", "viscous:omega_l", "viscous:omega_m")
+"""Keys whose columns are, to first order, the same speed: an encoder time skew and viscous
+friction (the twist cannot tell them apart; the current may)."""
+
+
+def _twist_per_speed(model: ComplianceModel, key: str) -> float:
+    """The twist [rad] per rad/s of link speed that the fitted term `key` adds."""
+    coef = np.asarray(model.coef)
+    i = model.n_coef - model.n_effect
+    for term in model.effect_terms:
+        m = len(term.names())
+        if term.key == key:
+            c = float(coef[i])
+            if key == "skew:encoders":
+                return c  # the coefficient is the delay: twist = delay * speed
+            per = c / term.scale
+            return per * model.ratio if term.signal == "omega_m" else per
+        i += m
+    return float("nan")
+
+
+def speed_reading(
+    best: Trial,
+    trials: list[Trial],
+    data: PipelineData,
+    notes: list[str],
+    try_key: Callable[[str], Trial | None] | None = None,
+) -> Trial:
+    """When the chosen trial is a speed term ([`VELOCITY_KEYS`][]), which reading the data
+    supports ([`hdjax.effects.velocity_reading`][]): its twist per speed, over the data's
+    compliance, against the current's own viscous slope. The chosen trial is swapped for the
+    other reading's (tried now through `try_key(key)` when it was not among the trials), and
+    the sentence is noted either way."""
+    key = best.key
+    if key not in VELOCITY_KEYS:
+        return best
+    model = best.model
+    view = data.view()
+    # the model's own compliance where the speed is (weighted by the speed's square)
+    w = np.asarray(view.sig.omega_l) ** 2
+    seg = np.searchsorted(np.asarray(model.knots), view.torque, side="right")
+    k_local = np.asarray(model.k)[seg]
+    k = float(np.sum(w * k_local) / np.sum(w)) if np.sum(w) > 0 else float("nan")
+    per_speed = _twist_per_speed(model, key) / k if k else float("nan")
+    slope = current_viscous_slope(
+        np.asarray(view.sig.current), view.torque, np.asarray(view.sig.omega_l)
+    )
+    sentence = velocity_reading(per_speed, slope)
+    want = "skew:encoders" if sentence.startswith("skew") else "viscous:omega_l"
+    if slope is not None and key != want:
+        other = [t for t in trials if t.key == want]
+        if not other and try_key is not None:
+            other = [t for t in [try_key(want)] if t is not None]
+        if other:
+            notes.append(f"{want} chosen over {key}, which fits the same speed column: {sentence}")
+            return other[0]
+    notes.append(f"{key}: {sentence}")
+    return best

@@ -1,0 +1,56 @@
+"""The residual loop's settings, and the stopping rule they set, in words."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from ._chunked import check_chunk
+from ._library import LibraryOptions
+
+
+@dataclasses.dataclass(frozen=True)
+class DiscoverOptions:
+    """Settings of the residual loop (see the module docstring for the stopping rule)."""
+
+    max_effects: int = 5
+    min_gain: float = 0.05
+    min_torque_gain: float = 0.02
+    min_stability: float = 0.7
+    n_resamples: int = 20
+    n_shortlist: int = 3
+    n_grid_tries: int = 3
+    seed: int = 0
+    n_folds: int = 5
+    block: int = 200
+    sindy_threshold: float = 0.02
+    library: LibraryOptions = dataclasses.field(default_factory=LibraryOptions)
+    n_segments: int = 5
+    poly_order: int = 6
+    fourier_order: int = 3
+    per_segment: bool = False
+    current_scale: float | None = None
+    chunk: int = 0
+    """Samples per chunk of the loop's least-squares fits (calibration, cross-validation,
+    candidate scores, intervals), so that no design of the whole record is formed; 0: the
+    whole record at once. Same coefficients to 1e-9 relative; memory bounded by the chunk."""
+
+    def __post_init__(self):
+        check_chunk(self.chunk)
+
+
+def stopping_rule(options: DiscoverOptions) -> str:
+    """The loop's stopping rule in words, with the values `options` gives it (the report's
+    `stopping_rule`, and the module docstring of [`hdjax.discover._loop`][] in general)."""
+    o = options
+    return (
+        f"a candidate is eligible when pysindy STLSQ selects it (threshold {o.sindy_threshold:g}) "
+        f"and it removes at least {o.min_gain:.0%} (min_gain) of the model's cross-validated "
+        f"twist error ({o.n_folds} folds of whole contiguous blocks of TRAIN) in the standard "
+        f"fold assignment and in at least {o.min_stability:.0%} (min_stability) of "
+        f"{o.n_resamples} resampled ones; of the {o.n_shortlist} best eligible candidates, those "
+        "that lower the cross-validated torque error (whole pipeline per fold: calibration, then "
+        f"inversion) by at least {o.min_torque_gain:.0%} (min_torque_gain) qualify, and the "
+        "lowest is added, or one with fewer columns within one standard error of it (paired "
+        f"over the held-out blocks); stop when none qualifies, or after {o.max_effects} effects "
+        "(max_effects)"
+    )
