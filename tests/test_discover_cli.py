@@ -128,6 +128,27 @@ def test_figures_and_markdown(files, tmp_path):
     assert_figure(out / "figures" / "residual_0.png", (1100, 352))
 
 
+def test_the_discovered_model_is_used_by_the_commands_the_report_prints(files, tmp_path):
+    # discover ends in a model: the report's "Use it" commands run as printed, and the
+    # estimate of TEST through model.json has the TEST error the report states
+    out = tmp_path / "out"
+    assert _run(files, out, "--max-effects", "1", "--no-figures") == 0
+    rep = json.loads((out / "report.json").read_text())
+    md = (out / "report.md").read_text()
+    use = md.split("## Use it", 1)[1]
+    commands = [c for c in use.split("```")[1].strip().splitlines()]
+    estimate_cmd = commands[0].replace("LOG.csv", str(files / "test.csv"))
+    estimate_cmd = estimate_cmd.replace("torque.csv", str(tmp_path / "torque.csv"))
+    assert main(estimate_cmd.split()[1:] + ["--quiet"]) == 0
+    est = np.genfromtxt(tmp_path / "torque.csv", delimiter=",", names=True)
+    ref = hdjax.load_csv(files / "test.csv").torque
+    rms = float(np.sqrt(np.mean((est["torque_estimate"] - np.asarray(ref)) ** 2)))
+    assert rep["effects"] == ["harmonic:theta_m:2"]
+    assert rms == pytest.approx(rep["final"]["rms"], rel=1e-9)
+    assert main(commands[1].split()[1:]) == 0
+    assert (tmp_path / "out_c" / "hdjax_estimator.c").is_file()
+
+
 def test_refuses_non_empty_out_without_overwrite(files, tmp_path, capsys):
     out = tmp_path / "out"
     out.mkdir()

@@ -197,7 +197,8 @@ def add_model_options(p: argparse.ArgumentParser, use: str) -> None:
     p.add_argument(
         "--model",
         required=True,
-        help="a model file written by 'hdjax run' (model.json), or the result folder holding it",
+        help="a model file written by 'hdjax run' or 'hdjax discover' (model.json), or the "
+        "result folder holding it",
     )
     p.add_argument(
         "--method",
@@ -215,7 +216,7 @@ def model_file(path) -> Path:
         if not (path / "model.json").is_file():
             raise ConfigError(
                 f"{path}: a folder without model.json; give the model.json written by "
-                "'hdjax run' (with [outputs] save_model = true)"
+                "'hdjax discover', or by 'hdjax run' (with [outputs] save_model = true)"
             )
         return path / "model.json"
     return path

@@ -205,6 +205,7 @@ def _run_into(rd, args: argparse.Namespace) -> int:
     write_report_into(
         rd,
         result,
+        joint=joint,
         train=train,
         figures=not args.no_figures,
         extra={
@@ -217,6 +218,8 @@ def _run_into(rd, args: argparse.Namespace) -> int:
     )
     say(
         f"done in {result.stats['fit_time_s']:.1f} s: effects {result.aux.effects or 'none'}; "
-        f"TEST torque RMS {result.aux.baseline.rms:.4g} -> {result.aux.final.rms:.4g} N·m"
+        f"TEST torque RMS {result.aux.baseline.rms:.4g} -> {result.aux.final.rms:.4g} N·m; "
+        f"next: read {rd.out}/report.md, or estimate with hdjax estimate --model "
+        f"{rd.out}/model.json --data LOG --out torque.csv"
     )
     return 0

@@ -11,9 +11,11 @@ import numpy as np
 from .. import effects
 from .._custom_types import PathLike
 from .._features import find_gaps
+from .._joint import Joint
 from .._plotting import fixed_margins, pyplot
 from .._solution import Solution
 from ..compliance._lstsq import CalibrationData
+from ..config import save_model
 from ..report import ResultDir
 from ._loop import ARCSEC, DiscoveryRecord, residual_spectra
 from ._options import DiscoverOptions, stopping_rule
@@ -195,8 +197,10 @@ def write_figures(solution: Solution, train, folder: Path) -> list[tuple[str, st
     return figs
 
 
-def report_markdown(d: dict, figures: list[tuple[str, str]]) -> str:
-    """The `report.md` of a report dict and its (caption, file name) figures."""
+def report_markdown(d: dict, figures: list[tuple[str, str]], use: str | None = None) -> str:
+    """The `report.md` of a report dict and its (caption, file name) figures; with `use`
+    (the result folder holding `model.json`), a last section giving the commands that use
+    the model."""
     lines = ["# hdjax discover", ""]
     # two tables, each narrow enough for the page: the errors, then each step's evidence
     lines.append(
@@ -256,6 +260,8 @@ def report_markdown(d: dict, figures: list[tuple[str, str]]) -> str:
         lines += ["## Notes", ""] + [f"- {note}" for note in notes] + [""]
     for caption, name in figures:
         lines += [f"![{caption}](figures/{name})", ""]
+    if use is not None:
+        lines += _use_lines(use, d)
     return "\n".join(lines)
 
 
@@ -293,13 +299,16 @@ def write_report(
     figures: bool = True,
     extra: dict[str, Any] | None = None,
     overwrite: bool = False,
+    joint: Joint | None = None,
 ) -> dict[str, Any]:
-    """Write `report.json`, `report.md` and `figures/` of a [`hdjax.discover.discover`][]
-    solution into the result folder `out`, atomically, by the rules of every hdjax result
-    folder ([`hdjax.report.ResultDir`][]: `out` absent or empty, or an earlier hdjax result
-    with `overwrite`); returns the report dict."""
+    """Write `report.json`, `report.md`, `figures/` and (given the `joint`) `model.json` of
+    a [`hdjax.discover.discover`][] solution into the result folder `out`, atomically, by the
+    rules of every hdjax result folder ([`hdjax.report.ResultDir`][]: `out` absent or empty,
+    or an earlier hdjax result with `overwrite`); returns the report dict."""
     with ResultDir(out, overwrite=overwrite, command="discover") as rd:
-        return write_report_into(rd, solution, train=train, figures=figures, extra=extra)
+        return write_report_into(
+            rd, solution, train=train, figures=figures, extra=extra, joint=joint
+        )
 
 
 def write_report_into(
@@ -309,13 +318,48 @@ def write_report_into(
     train: CalibrationData | None = None,
     figures: bool = True,
     extra: dict[str, Any] | None = None,
+    joint: Joint | None = None,
 ) -> dict[str, Any]:
     """[`write_report`][] into an open [`hdjax.report.ResultDir`][] (the command line's):
-    the report first, then the figures in one pass, `report.md` naming them last."""
+    the model and the report first, then the figures in one pass, `report.md` naming them
+    last. The model file is the one `hdjax estimate` and `hdjax export` read
+    ([`hdjax.config.save_model`][]); `report.md` ends with the commands that use it."""
     d = report_dict(solution, extra=extra)
+    use = None
+    if joint is not None:
+        save_model(
+            rd.path("model.json"),
+            joint,
+            compliance=solution.value,
+            meta={"written_by": "hdjax discover", "effects": solution.aux.effects},
+        )
+        use = str(rd.out)
     rd.write_json("report.json", d)
-    rd.write_text("report.md", report_markdown(d, []))
+    rd.write_text("report.md", report_markdown(d, [], use=use))
     if figures:
         figs = write_figures(solution, train, rd.path("figures/.keep").parent)
-        rd.write_text("report.md", report_markdown(d, figs))
+        rd.write_text("report.md", report_markdown(d, figs, use=use))
     return d
+
+
+def _use_lines(out: str, d: dict) -> list[str]:
+    """The "Use it" section: the commands that apply the final model."""
+    model = f"{out}/model.json"
+    effects = ", ".join(f"`{e}`" for e in d["effects"]) or "no added effect"
+    return [
+        "## Use it",
+        "",
+        f"The final model ({effects}) is in `{model}`:",
+        "",
+        "```",
+        f"hdjax estimate --model {model} --data LOG.csv --out torque.csv",
+        f"hdjax export --model {model} --out {out}_c",
+        f"hdjax discover --train MORE.csv --test {d.get('test') or 'TEST.csv'} --joint JOINT.toml"
+        f" --out {out}_again",
+        "```",
+        "",
+        "The first estimates the torque of another log of this joint (add `--columns` and "
+        "`--joint` with the config that maps its columns); the second writes the estimator as C "
+        "for the controller, with test vectors; the third runs the loop again on more data.",
+        "",
+    ]
