@@ -304,7 +304,7 @@ def test_chunked_scores_hold_chunks_not_the_record(base, monkeypatch):
     of each chunk's rows would keep alive."""
     import tracemalloc
 
-    import hdjax.discover._loop as loop
+    import hdjax.discover._scores as loop
 
     monkeypatch.setattr(loop, "MAX_SINDY_ROWS", 300)  # thinned rows on this short record
     held = []

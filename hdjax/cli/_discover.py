@@ -96,16 +96,18 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument(
         "--max-effects",
         type=int,
-        default=DEFAULTS.max_effects,
-        help=f"most effects to add (default {DEFAULTS.max_effects})",
+        default=None,
+        help=f"most effects to add (default {DEFAULTS.max_effects}; given, it overrides "
+        "[discover] max_effects of --config)",
     )
     p.add_argument(
         "--min-gain",
         type=float,
-        default=DEFAULTS.min_gain,
+        default=None,
         help="least cross-validated share of the twist error an effect must remove, in the "
         f"standard folds and in at least {100 * DEFAULTS.min_stability:.0f} %% of resampled fold "
-        f"assignments (default {DEFAULTS.min_gain:g})",
+        f"assignments (default {DEFAULTS.min_gain:g}; given, it overrides [discover] min_gain "
+        "of --config)",
     )
     p.add_argument(
         "--chunk",
@@ -132,9 +134,9 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
 def run(args: argparse.Namespace) -> int:
     """Carry out a parsed `discover` command; raises `HdjaxError` on bad input."""
     out: Path = args.out
-    if args.max_effects < 0:
+    if args.max_effects is not None and args.max_effects < 0:
         raise DataError(f"--max-effects must be >= 0, got {args.max_effects}")
-    if not 0.0 < args.min_gain < 1.0:
+    if args.min_gain is not None and not 0.0 < args.min_gain < 1.0:
         raise DataError(f"--min-gain must lie in (0, 1), got {args.min_gain}")
     if args.config is not None and (args.train or args.test or args.joint):
         raise DataError("give either --config or --train/--test/--joint, not both")
@@ -150,6 +152,14 @@ def run(args: argparse.Namespace) -> int:
     check_read_memory(inputs[:2] + inputs[4:], fix="give shorter --train and --test logs")
     with ResultDir(out, overwrite=args.overwrite, inputs=inputs, command="discover") as rd:
         return _run_into(rd, args)
+
+
+def _setting(given, cfg: dict, key: str, kind):
+    """A loop setting: the command line's when given, else the config's, else the loop's own
+    default ([`hdjax.discover.DiscoverOptions`][])."""
+    if given is not None:
+        return kind(given)
+    return kind(cfg.get(key, getattr(DEFAULTS, key)))
 
 
 def _config_inputs(path: Path) -> list[Path]:
@@ -178,8 +188,8 @@ def _run_into(rd, args: argparse.Namespace) -> int:
     for w in caught:
         say(f"warning: {w.message}")
     options = DiscoverOptions(
-        max_effects=int(cfg.get("max_effects", args.max_effects)),
-        min_gain=float(cfg.get("min_gain", args.min_gain)),
+        max_effects=_setting(args.max_effects, cfg, "max_effects", int),
+        min_gain=_setting(args.min_gain, cfg, "min_gain", float),
         n_segments=int(cfg.get("n_segments", DEFAULTS.n_segments)),
         poly_order=int(cfg.get("poly_order", DEFAULTS.poly_order)),
         fourier_order=int(cfg.get("fourier_order", DEFAULTS.fourier_order)),

@@ -132,7 +132,7 @@ class DiscoveryRecord:
     1/2), cross-validation does not represent TEST."""
     stopping_rule: str = ""
     """The rule the loop stopped by, in words, with its settings
-    ([`hdjax.discover._options.stopping_rule`][])."""
+    (see `DiscoverOptions`)."""
 
     @property
     def effects(self) -> list[str]:
