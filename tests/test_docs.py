@@ -141,6 +141,18 @@ def test_getting_started_commands_run_as_written(monkeypatch, tmp_path):
     assert estimate[0].startswith("t,torque_estimate")
     assert len(estimate) == len((DOCS / "examples" / "bench_test.csv").read_text().splitlines())
     assert (tmp_path / "bench_discover" / "report.json").is_file()
+    # the discovered model, used as the report prints: the TEST error the report states
+    import json
+
+    import numpy as np
+
+    rep = json.loads((tmp_path / "bench_discover" / "report.json").read_text())
+    est = np.genfromtxt(tmp_path / "bench_discovered_torque.csv", delimiter=",", names=True)
+    ref = np.genfromtxt(DOCS / "examples" / "bench_test.csv", delimiter=",", names=True)
+    col = [n for n in ref.dtype.names if "torque" in n][0]
+    rms = float(np.sqrt(np.mean((est["torque_estimate"] - ref[col]) ** 2)))
+    assert rep["effects"], rep["notes"]
+    assert rms == pytest.approx(rep["final"]["rms"], rel=1e-9), (rms, rep["final"])
 
 
 def test_benchmarks_page_is_rendered_from_the_snapshot():
