@@ -88,3 +88,22 @@ def test_resolved_dump_round_trips(tmp_path):
     text = dumps_toml(dict(exp), header="resolved\nsecond line")
     again = resolve(tomllib.loads(text))
     assert again == dict(exp)
+
+
+def test_a_model_key_the_kinematic_form_ignores_is_refused_naming_the_form():
+    # `harmonic_orders_m = [2]` under the default kinematic = "paper" was silently ignored
+    doc = {"joint": {"ratio": 160, "rated_torque": 400}, "model": {"harmonic_orders_m": [2.0]}}
+    with pytest.raises(
+        ConfigError, match='harmonic_orders_m: read only with kinematic = "harmonic"'
+    ):
+        resolve(doc)
+    doc["model"]["kinematic"] = "harmonic"
+    assert resolve(doc)["model"]["harmonic_orders_m"] == [2.0]
+    doc = {"joint": {"ratio": 160, "rated_torque": 400}, "model": {"kinematic": "none"}}
+    doc["model"]["fourier_order"] = 1
+    with pytest.raises(ConfigError, match='set kinematic = "paper" to use it, or remove'):
+        resolve(doc)
+    # a resolved config lists every key at its default: it is accepted as it is
+    doc["model"]["fourier_order"] = resolve({"joint": doc["joint"]})["model"]["fourier_order"]
+    again = resolve(resolve(doc))
+    assert again["model"]["kinematic"] == "none"

@@ -262,7 +262,32 @@ def resolve(doc: Mapping, *, where: str = "config") -> dict:
                 clean[key] = _copy(default)
         out[table] = clean
     _cross_checks(out, where)
+    _check_used(doc.get("model", {}), out["model"], where)
     return out
+
+
+_ENABLED_BY = {
+    "harmonic_orders_m": "harmonic",
+    "harmonic_orders_l": "harmonic",
+    "fourier_order": "paper",
+}
+"""`[model]` keys that one `kinematic` form alone reads (Song et al. 2019, eq. (9), or the
+harmonic series of the residual loop)."""
+
+
+def _check_used(given: Mapping, model: Mapping, where: str) -> None:
+    """Refuse a `[model]` key set away from its default that the chosen `kinematic` form
+    ignores, naming the setting that reads it (a key silently ignored would leave the model
+    other than the user thinks; a resolved config, which lists every key at its default, is
+    accepted)."""
+    spec = SCHEMA["model"]
+    for key, form in _ENABLED_BY.items():
+        set_ = key in given and model[key] != spec[key][0]
+        if set_ and model["kinematic"] != form:
+            raise ConfigError(
+                f'{where} [model] {key}: read only with kinematic = "{form}", but kinematic = '
+                f'"{model["kinematic"]}"; set kinematic = "{form}" to use it, or remove {key}'
+            )
 
 
 def _copy(v):
