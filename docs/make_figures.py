@@ -52,6 +52,9 @@ def main(argv=None) -> None:
                 "here by `python docs/make_figures.py --lara8`; not edited by hand."
             )
             report = report.replace("# hdjax discover", f"{title}\n\n{note}", 1)
+            # the commands it prints name the repository's files and a folder of the user's
+            out = figures.parent
+            report = report.replace(str(out), "runs/lara8").replace(f"{REPO}/", "")
             (target / "report.md").write_text(report)
 
 

@@ -346,20 +346,21 @@ def _use_lines(out: str, d: dict) -> list[str]:
     """The "Use it" section: the commands that apply the final model."""
     model = f"{out}/model.json"
     effects = ", ".join(f"`{e}`" for e in d["effects"]) or "no added effect"
+    config = d.get("config")
+    columns = f" --columns {config} --joint {config}" if config else ""
     return [
         "## Use it",
         "",
         f"The final model ({effects}) is in `{model}`:",
         "",
         "```",
-        f"hdjax estimate --model {model} --data LOG.csv --out torque.csv",
+        f"hdjax estimate --model {model} --data LOG.csv{columns} --out torque.csv",
         f"hdjax export --model {model} --out {out}_c",
-        f"hdjax discover --train MORE.csv --test {d.get('test') or 'TEST.csv'} --joint JOINT.toml"
-        f" --out {out}_again",
         "```",
         "",
-        "The first estimates the torque of another log of this joint (add `--columns` and "
-        "`--joint` with the config that maps its columns); the second writes the estimator as C "
-        "for the controller, with test vectors; the third runs the loop again on more data.",
+        "The first estimates the torque of another log of this joint"
+        + (" (the config maps its columns)" if config else "")
+        + "; the second writes the estimator as C for the controller, with test vectors to "
+        "check the build against.",
         "",
     ]
