@@ -129,8 +129,9 @@ def test_figures_and_markdown(files, tmp_path):
 
 
 def test_the_discovered_model_is_used_by_the_commands_the_report_prints(files, tmp_path):
-    # discover ends in a model: the report's "Use it" commands run as printed, and the
-    # estimate of TEST through model.json has the TEST error the report states
+    # discover ends in a model: the report's "Use it" commands run as printed; the estimate
+    # of TEST through model.json, and hdjax run of experiment.toml, have the TEST error the
+    # report states
     out = tmp_path / "out"
     assert _run(files, out, "--max-effects", "1", "--no-figures") == 0
     rep = json.loads((out / "report.json").read_text())
@@ -145,7 +146,14 @@ def test_the_discovered_model_is_used_by_the_commands_the_report_prints(files, t
     rms = float(np.sqrt(np.mean((est["torque_estimate"] - np.asarray(ref)) ** 2)))
     assert rep["effects"] == ["harmonic:theta_m:2"]
     assert rms == pytest.approx(rep["final"]["rms"], rel=1e-9)
-    assert main(commands[1].split()[1:]) == 0
+    # experiment.toml: hdjax run calibrates the final structure again, to the same TEST error
+    assert commands[1] == f"hdjax run {out}/experiment.toml --out {out}_run"
+    assert main(commands[1].split()[1:] + ["--quiet"]) == 0
+    run = json.loads((tmp_path / "out_run" / "metrics.json").read_text())["model"]["scenarios"]
+    (scored,) = run.values()
+    assert scored["rms"] == pytest.approx(rep["final"]["rms"], rel=1e-9)
+    assert scored["max"] == pytest.approx(rep["final"]["max"], rel=1e-9)
+    assert main(commands[2].split()[1:]) == 0
     assert (tmp_path / "out_c" / "hdjax_estimator.c").is_file()
 
 

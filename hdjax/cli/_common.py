@@ -115,15 +115,25 @@ def add_quiet(p: argparse.ArgumentParser, help: str = "no progress lines on stde
 
 
 def add_experiment_command(
-    sub, name: str, help: str, example: str, *, config: str, out: str, flags: dict
+    sub,
+    name: str,
+    help: str,
+    example: str,
+    *,
+    config: str,
+    out: str,
+    flags: dict,
+    options: dict | None = None,
 ) -> argparse.ArgumentParser:
     """The parser of a command that runs an experiment file (`run`, `sweep`): the file
-    (`config` its help), the command's on/off `flags` (option -> help), `--out` (`out` its
-    help), `--overwrite`, `--set`, `--force` and `--quiet`."""
+    (`config` its help), the command's on/off `flags` and valued `options` (option -> help),
+    `--out` (`out` its help), `--overwrite`, `--set`, `--force` and `--quiet`."""
     p = add_command(sub, name, help, example)
     p.add_argument("config", help=config)
     for flag, flag_help in flags.items():
         add_flag(p, flag, flag_help)
+    for option, option_help in (options or {}).items():
+        p.add_argument(option, help=option_help)
     p.add_argument("--out", help=out)
     add_flag(p, "--overwrite", RESULT_OVERWRITE)
     p.add_argument(

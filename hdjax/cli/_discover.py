@@ -27,6 +27,7 @@ from ..discover import _loop  # `_loop.discover` looked up at call time, where a
 from ..discover._checks import check_inputs
 from ..discover._chunked import check_chunk
 from ..discover._config import load_discover_config
+from ..discover._experiment import experiment_toml
 from ..discover._options import DiscoverOptions
 from ..discover._report import write_report_into
 from ..report import ResultDir
@@ -162,6 +163,30 @@ def _setting(given, cfg: dict, key: str, kind):
     return kind(cfg.get(key, getattr(DEFAULTS, key)))
 
 
+def _experiment(args, joint, context_split: bool) -> tuple[str, str]:
+    """The `experiment.toml` text that reproduces the final model with `hdjax run`, or `""`
+    and why there is none."""
+    if context_split:
+        return "", (
+            "TRAIN and TEST are blocks of one log ([data] test_blocks), which hdjax run does "
+            "not cut the same way; use hdjax run --model with TRAIN and TEST logs of your own"
+        )
+    if args.config is None:
+        data, train, test = {}, args.train, args.test
+    else:
+        data = read_toml(args.config).get("data", {})
+        here = args.config.parent
+        train, test = here / data["train"], here / data["test"]
+    return experiment_toml(
+        joint,
+        train.resolve(),
+        test.resolve(),
+        data,
+        name=f"{args.out.name}_run",
+        out=str(args.out),
+    ), ""
+
+
 def _config_inputs(path: Path) -> list[Path]:
     """The data files a discover config names (for the output rules)."""
     data = read_toml(path).get("data", {})
@@ -207,18 +232,22 @@ def _run_into(rd, args: argparse.Namespace) -> int:
         )
         train, test = drop(train), drop(test)
         context = None if context is None else drop(context)
+    context_split = context is not None
     # one log cut into TRAIN and TEST: the loop sees it whole (not chunk by chunk)
     context = context if not options.chunk else None
     result = _loop.discover(train, test, joint, options, progress=say, context=context)
     result.aux.notes[:0] = cfg_notes + notes + [f"input warning: {w.message}" for w in caught]
     say("writing report" + ("" if args.no_figures else " and figures"))
+    experiment, missing = _experiment(args, joint, context_split)
     write_report_into(
         rd,
         result,
         joint=joint,
         train=train,
         figures=not args.no_figures,
+        experiment=experiment,
         extra={
+            "experiment_missing": missing,
             "train": train.source,
             "test": test.source,
             "joint": joint.to_dict(),

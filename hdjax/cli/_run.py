@@ -7,7 +7,7 @@ from pathlib import Path
 
 # compliance.estimate_torque is looked up at each call (a test stops the command there)
 from .. import compliance
-from .._errors import InversionError
+from .._errors import ConfigError, InversionError
 from ..compliance import calibration_messages, check_invertible
 from ..config import (
     build_dataset,
@@ -28,7 +28,13 @@ from ..report import (
     markdown_table,
     torque_figure,
 )
-from ._common import Progress, add_experiment_command, experiment_inputs, parse_overrides
+from ._common import (
+    Progress,
+    add_experiment_command,
+    experiment_inputs,
+    model_file,
+    parse_overrides,
+)
 
 HELP = "run an experiment config: calibrate, estimate, score, write figures and a report"
 EXAMPLE = """\
@@ -54,6 +60,11 @@ def add_parser(sub) -> None:
             "--no-figures": "skip the figures (faster)",
             "--no-network": "skip the network method",
         },
+        options={
+            "--model": "calibrate the structure of this saved model (a model.json, or the result "
+            "folder holding it, e.g. hdjax discover's) instead of the one [model] builds; same "
+            "as --set model.structure=M",
+        },
     )
 
 
@@ -64,8 +75,19 @@ def command(args, parser) -> int:
         overrides["outputs.figures"] = False
     if args.no_network:
         overrides["network.enabled"] = False
+    if args.model:
+        overrides["model.structure"] = str(model_file(args.model).resolve())
     exp = load_experiment(args.config, overrides)
     preflight(exp, base_dir=exp.base_dir, where=str(args.config))
+    structure = exp["model"]["structure"]
+    if structure:  # relative to the experiment file, like its data paths
+        path = exp.base_dir / Path(structure).expanduser()
+        if not path.is_file():
+            raise ConfigError(
+                f"{args.config} [model] structure = {structure!r}: no such file ({path}); give "
+                "the model.json written by hdjax run or hdjax discover"
+            )
+        exp["model"]["structure"] = str(path)
     out = Path(args.out) if args.out else Path("runs") / exp["experiment"]["name"]
     inputs = experiment_inputs(exp)
     with ResultDir(out, overwrite=args.overwrite, inputs=inputs, command="run") as rd:
@@ -99,10 +121,13 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
     # -- the model-based method --------------------------------------------------------------
     progress(f"calibrating the compliance model on {ds.n_train} samples ({cfg['fit']['method']})")
     scale = P.current_scale(cfg, ds.train)
-    model0 = P.build_model(cfg, joint, scale)
     t0 = time.perf_counter()
     notes: list[str] = []
-    cal = P.calibrate(cfg, model0, ds.train, warn=notes.append)
+    if cfg["model"]["structure"]:  # a saved model's structure (e.g. hdjax discover's)
+        cal = P.calibrate_saved(cfg, ds.train, warn=notes.append)
+    else:
+        model0 = P.build_model(cfg, joint, scale)
+        cal = P.calibrate(cfg, model0, ds.train, warn=notes.append)
     fit_s = time.perf_counter() - t0
     not_invertible = check_invertible(cal.value)
     if not_invertible:  # one line: the estimate would fail on it, so say it once, as the error
@@ -110,7 +135,8 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
         raise InversionError(f"{not_invertible}{cause}")
     if forced:
         progress.warn(f"{forced} (--force: running anyway; the results may be wrong)")
-    messages = calibration_messages(cal)
+    said = " ".join(notes)  # a term the calibration's warning named is not said again
+    messages = [m for m in calibration_messages(cal) if m.removeprefix("left out: ") not in said]
     for msg in notes + messages:
         progress.warn(msg)
     progress("estimating torque with the model (eqs. 26-27)")

@@ -12,7 +12,7 @@ from typing import Any
 from .._custom_types import PathLike
 from .._errors import ConfigError
 from .._io import TOML_HINT, ColumnMap, read_text
-from ._schema import apply_setting, resolve
+from ._schema import apply_setting, check_used, resolve
 
 _POSITION = re.compile(r"^(?P<msg>.*?)\s*\(at line (?P<line>\d+), column (?P<col>\d+)\)\s*$")
 
@@ -94,6 +94,11 @@ def load_experiment(path: PathLike, overrides: Mapping[str, object] | None = Non
     cfg = resolve(doc, where=str(path))
     for setting, value in (overrides or {}).items():
         cfg = apply_setting(cfg, setting, value, where="--set")
+    if overrides:  # a [model] key set on the command line must be read, like the file's
+        # (a structure given there replaces the structure the file's keys build)
+        given = {} if "model.structure" in overrides else dict(doc.get("model", {}))
+        given.update({k[6:]: v for k, v in overrides.items() if k.startswith("model.")})
+        check_used(given, cfg["model"], f"{path} with --set")
     exp = Experiment(cfg)
     exp.path = path.resolve()
     return exp
@@ -114,8 +119,9 @@ def experiment_from_dict(
 
 def with_absolute_paths(exp: Experiment) -> dict:
     """A copy of a resolved config whose file settings (`[data]` train and test, the
-    `[data.reference]` DH table or URDF) are absolute paths, so the `config.resolved.toml` a
-    result directory keeps still finds its files when it is run from there."""
+    `[data.reference]` DH table or URDF, `[model]` structure) are absolute paths, so the
+    `config.resolved.toml` a result directory keeps still finds its files when it is run from
+    there."""
     import copy
     import os
 
@@ -130,6 +136,9 @@ def with_absolute_paths(exp: Experiment) -> dict:
         data["test"] = [absolute(n) for n in tests]
     elif isinstance(tests, dict):
         data["test"] = {k: absolute(n) for k, n in tests.items()}
+    model = cfg.get("model", {})
+    if model.get("structure"):
+        model["structure"] = absolute(model["structure"])
     ref = data.get("reference")
     if isinstance(ref, dict):
         for key in ("dh", "urdf"):

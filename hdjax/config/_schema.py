@@ -165,6 +165,9 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "harmonic_orders_l": ([1.0, 2.0], _list(_num(positive=True))),
         "per_segment": (True, _bool),
         "velocity": ("difference", _choice("difference", "smoothed")),
+        # a saved model (model.json, e.g. written by hdjax discover) whose structure (segments,
+        # terms, effects) is calibrated instead of the one the keys above build; "" = none
+        "structure": ("", _str),
     },
     "fit": {
         "method": ("lstsq", _choice("lstsq", "rls")),
@@ -262,7 +265,7 @@ def resolve(doc: Mapping, *, where: str = "config") -> dict:
                 clean[key] = _copy(default)
         out[table] = clean
     _cross_checks(out, where)
-    _check_used(doc.get("model", {}), out["model"], where)
+    check_used(doc.get("model", {}), out["model"], where)
     return out
 
 
@@ -275,12 +278,20 @@ _ENABLED_BY = {
 harmonic series of the residual loop)."""
 
 
-def _check_used(given: Mapping, model: Mapping, where: str) -> None:
+def check_used(given: Mapping, model: Mapping, where: str) -> None:
     """Refuse a `[model]` key set away from its default that the chosen `kinematic` form
     ignores, naming the setting that reads it (a key silently ignored would leave the model
     other than the user thinks; a resolved config, which lists every key at its default, is
     accepted)."""
     spec = SCHEMA["model"]
+    if model["structure"]:
+        for key in _STRUCTURE_KEYS:
+            if key in given and model[key] != spec[key][0]:
+                raise ConfigError(
+                    f"{where} [model] {key}: not read when structure is given (the saved "
+                    f"model {model['structure']!r} sets the structure); remove {key}, or "
+                    "remove structure to build the model from the keys"
+                )
     for key, form in _ENABLED_BY.items():
         set_ = key in given and model[key] != spec[key][0]
         if set_ and model["kinematic"] != form:

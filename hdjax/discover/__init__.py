@@ -24,3 +24,8 @@ from ._spectrum import (
     order_spectrum as order_spectrum,
     spectrum_peaks as spectrum_peaks,
 )
+from ._start import (
+    calibrate_start as calibrate_start,
+    calibrate_structure as calibrate_structure,
+    fallback_tables as fallback_tables,
+)

@@ -43,8 +43,8 @@ from .._joint import Joint
 from .._metrics import ErrorMetrics, error_metrics
 from .._recording import Recording
 from .._solution import RESULTS, Solution
-from ..compliance import ComplianceModel, merge_sparse_segments
-from ..compliance._lstsq import CalibrationData, failure_message, prepare
+from ..compliance import ComplianceModel
+from ..compliance._lstsq import CalibrationData, prepare
 from ..effects import AbstractTerm
 from ..reference import reference_checks
 from ._aliases import find_aliases
@@ -68,11 +68,11 @@ from ._pipeline import (
     cross_validate,
     design,
     estimate,
-    fit_merging,
     has_path,
 )
 from ._scores import _as_data, score_candidates as score_candidates, training_data
 from ._spectrum import OrderSpectrum, order_spectrum
+from ._start import calibrate_start, toml_settings
 from ._timing import Phases, null_phases
 from ._uncertainty import bootstrap_length, effect_intervals, instrument_torque
 from ._unexplained import all_spectra, unexplained_structure
@@ -139,64 +139,39 @@ class DiscoveryRecord:
         return [s.key for s in self.steps]
 
 
-def _calibrate_monotone(model, data: PipelineData, notes, chunk=0):
-    """Calibrate the starting model (shape-constrained, merging segments the data does not
-    determine: [`hdjax.discover._pipeline.fit_merging`][]); a failure raises."""
-    res = fit_merging(model, data.pair(), notes, chunk=chunk, rows=data.rows, throw=False)
-    if not res.ok:
-        raise CalibrationError(failure_message(res))
-    return res
+def start_table(options: DiscoverOptions) -> dict:
+    """The `[model]` settings of the loop's starting model (those `hdjax run` reads too)."""
+    return {
+        "n_segments": options.n_segments,
+        "poly_order": options.poly_order,
+        "kinematic": "paper" if options.fourier_order else "none",
+        "fourier_order": options.fourier_order,
+        "per_segment": options.per_segment,
+        "velocity": "difference",
+    }
 
 
 def calibrate_baseline(
     train: Recording | PipelineData, joint: Joint, options: DiscoverOptions, notes: list[str]
 ) -> ComplianceModel:
-    """The starting model (paper structure) calibrated on `train`, with documented fallbacks.
-
-    Segments the torque hardly covers, or whose compliance comes out non-positive, are merged
-    into their inner neighbour. If the model is rank-deficient on the data (e.g. a current that
-    is the reference torque itself), fall back in order to shared coefficients, then without
-    the current polynomial, then without the kinematic-error term, and say so in `notes`.
-    `train` is a recording, or its pipeline signals (a part of a log with `rows`).
+    """The starting model (paper structure, settings `start_table(options)`) calibrated on
+    `train` by [`hdjax.discover.calibrate_start`][], the function `hdjax run` calibrates
+    through: segments the data does not determine merged, documented fallbacks, said in
+    `notes`. `train` is a recording, or its pipeline signals (a part of a log with `rows`).
     """
     data = _as_data(None, train, joint)
     current = data.part(data.sig.current)
     scale = options.current_scale or float(np.max(np.abs(current))) or 1.0
-    attempts = []
-    for kw in (
-        dict(
-            per_segment=options.per_segment,
-            poly_order=options.poly_order,
-            fourier_order=options.fourier_order,
-        ),
-        dict(per_segment=False, poly_order=options.poly_order, fourier_order=options.fourier_order),
-        dict(per_segment=False, poly_order=0, fourier_order=options.fourier_order),
-        dict(per_segment=False, poly_order=0, fourier_order=0),
-    ):
-        if kw not in attempts:
-            attempts.append(kw)
-    last = None
-    for i, kw in enumerate(attempts):
-        model = ComplianceModel.paper(
-            joint,
-            n_segments=options.n_segments,
-            current_scale=scale,
-            kinematic="paper" if kw["fourier_order"] else "none",
-            **kw,
-        )
-        model, merged = merge_sparse_segments(model, data.part(data.torque))
-        trial_notes = list(merged)
-        try:
-            res = _calibrate_monotone(model, data, trial_notes, options.chunk)
-        except (CalibrationError, InversionError) as err:
-            last = err
-            notes.append(f"starting model {kw} not calibrated: {err}")
-            continue
-        notes.extend(trial_notes)
-        if i:
-            notes.append(f"starting model fell back to {kw}")
-        return res.value
-    raise CalibrationError(f"no starting model could be calibrated on the training data: {last}")
+    res = calibrate_start(
+        start_table(options),
+        joint,
+        data.pair(),
+        notes,
+        scale=scale,
+        chunk=options.chunk,
+        rows=data.rows,
+    )
+    return res.value
 
 
 def _test_errors(model, test, rated):
@@ -399,6 +374,13 @@ def _no_step_note(trials, shortlist, cv, options) -> str:
 def _start(train, test, joint, options, phase, notes, say):
     """The starting model calibrated on TRAIN, its errors on TEST, its TRAIN estimate and
     twist residual (on TRAIN's rows)."""
+    notes.append(
+        f"starting model: [model] {toml_settings(start_table(options))}, calibrated by the "
+        "function hdjax run calibrates with (the same logs and [model] settings give the same "
+        "starting model there); on purpose, run's default is per_segment = true (the paper's "
+        'Table I), and run with [fit] method = "rls" or a chunked fit calibrates its '
+        "structure without merging segments"
+    )
     with phase("baseline"):
         model = calibrate_baseline(train, joint, options, notes)
         # with a chunk, estimates run chunk by chunk too (see PipelineData.chunk)

@@ -419,14 +419,20 @@ def refined_structure(model: ComplianceModel) -> ComplianceModel | None:
 
 
 def calibrate(
-    structure: ComplianceModel, data: PipelineData, notes, previous_estimate, chunk: int = 0
+    structure: ComplianceModel,
+    data: PipelineData,
+    notes,
+    previous_estimate,
+    chunk: int = 0,
+    fits: list | None = None,
 ):
     """Calibrate `structure` on all of `data`; with path terms, driver rounds from
     `previous_estimate`; with `chunk`, the fits accumulated chunk by chunk; terms whose column
     follows their own coefficient are refitted to their fixed point ([`refined_structure`][]).
+    Each fit's Solution is appended to `fits` when given (the last one's value is the model).
     **Returns:** (model, its torque estimate on `data`)."""
     for _ in range(REFINE_ROUNDS):
-        model, est = _calibrate_once(structure, data, notes, previous_estimate, chunk)
+        model, est = _calibrate_once(structure, data, notes, previous_estimate, chunk, fits)
         structure = refined_structure(model)
         if structure is None:
             break
@@ -481,14 +487,17 @@ def fit_merging(structure, pair, notes, chunk=0, rows=None, throw=True):
         structure = merge_knot(structure, j)
 
 
-def _calibrate_once(structure, data, notes, previous_estimate, chunk):
+def _calibrate_once(structure, data, notes, previous_estimate, chunk, fits=None):
+    fits = [] if fits is None else fits
     structure = canonical(structure)
     if not has_path(structure):
-        model = fit_merging(structure, data.pair(), notes, chunk=chunk, rows=data.rows).value
+        fits.append(fit_merging(structure, data.pair(), notes, chunk=chunk, rows=data.rows))
+        model = fits[-1].value
         return model, estimate(model, data)
     driver = previous_estimate
     for _ in range(DRIVER_ROUNDS):
-        model = fit_merging(structure, data.pair(driver), notes, chunk=chunk, rows=data.rows).value
+        fits.append(fit_merging(structure, data.pair(driver), notes, chunk=chunk, rows=data.rows))
+        model = fits[-1].value
         structure = canonical(model)
         why = hysteresis_invertible(model)
         if why:

@@ -319,12 +319,18 @@ def write_report_into(
     figures: bool = True,
     extra: dict[str, Any] | None = None,
     joint: Joint | None = None,
+    experiment: str = "",
 ) -> dict[str, Any]:
     """[`write_report`][] into an open [`hdjax.report.ResultDir`][] (the command line's):
     the model and the report first, then the figures in one pass, `report.md` naming them
-    last. The model file is the one `hdjax estimate` and `hdjax export` read
-    ([`hdjax.config.save_model`][]); `report.md` ends with the commands that use it."""
+    last. The model file is the one `hdjax estimate`, `hdjax run --model` and `hdjax export`
+    read ([`hdjax.config.save_model`][]); `experiment`, when given, is written as
+    `experiment.toml` (the lines that reproduce the final model with `hdjax run`, from
+    `hdjax.discover._experiment`); `report.md` ends with the commands that use them."""
     d = report_dict(solution, extra=extra)
+    if experiment:
+        rd.write_text("experiment.toml", experiment)
+        d["experiment"] = "experiment.toml"
     use = None
     if joint is not None:
         save_model(
@@ -348,19 +354,33 @@ def _use_lines(out: str, d: dict) -> list[str]:
     effects = ", ".join(f"`{e}`" for e in d["effects"]) or "no added effect"
     config = d.get("config")
     columns = f" --columns {config} --joint {config}" if config else ""
-    return [
+    run = [f"hdjax run {out}/experiment.toml --out {out}_run"] if d.get("experiment") else []
+    lines = [
         "## Use it",
         "",
         f"The final model ({effects}) is in `{model}`:",
         "",
         "```",
         f"hdjax estimate --model {model} --data LOG.csv{columns} --out torque.csv",
+        *run,
         f"hdjax export --model {model} --out {out}_c",
         "```",
         "",
         "The first estimates the torque of another log of this joint"
         + (" (the config maps its columns)" if config else "")
-        + "; the second writes the estimator as C for the controller, with test vectors to "
-        "check the build against.",
+        + "; "
+        + (
+            "the second calibrates the model's structure again on TRAIN with `hdjax run` "
+            "(`experiment.toml`: the same model and TEST error, with run's figures and report; "
+            "edit it, or run `hdjax run YOUR.toml --model "
+            f"{model}` to calibrate this structure on other logs); the third"
+            if run
+            else "the second"
+        )
+        + " writes the estimator as C for the controller, with test vectors to check the build "
+        "against.",
         "",
     ]
+    if not run and d.get("experiment_missing"):
+        lines += [f"No `experiment.toml`: {d['experiment_missing']}.", ""]
+    return lines

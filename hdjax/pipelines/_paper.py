@@ -22,13 +22,14 @@ from .._metrics import error_metrics
 from .._recording import Recording
 from ..compliance import (
     RecordingStream,
-    calibrate_lstsq,
     calibrate_rls,
     calibrate_stream,
     estimate_torque,
 )
+from ..config._saved_model import check_compatible, load_model
 from ..config._schema import model_of
 from ..config._streamed import PartStream
+from ..discover import calibrate_start, calibrate_structure
 from . import _streamed as S
 
 PAPER_MS_PER_100 = {"model": 9.232, "network": 25.442}
@@ -89,12 +90,19 @@ def stacked_signals(model, recordings: list[Recording]):
 def calibrate(cfg: dict, model, train: list[Recording] | PartStream, warn=None):
     """Calibrate by the `[fit]` method; returns the calibration's [`hdjax.Solution`][].
 
-    Warnings (terms the data cannot reach) go to `warn` (a callable) when given.
+    Least squares on recordings held in memory (the default) calibrates through
+    [`hdjax.discover.calibrate_start`][], the function that calibrates `hdjax discover`'s
+    starting model: segments the data does not determine are merged, the segment
+    compliances are held above a floor (shape-constrained eq. (17)), and a rank-deficient
+    structure falls back to a simpler one. Recursive least squares (eqs. (18)-(21)) and the
+    streamed fit of long logs calibrate `model` as it is. Warnings and those notes (terms the
+    data cannot reach, merges, fallbacks) go to `warn` (a callable) when given.
     """
     fit = cfg["fit"]
     streamed = isinstance(train, RecordingStream)  # a StreamedDataset's parts, read in chunks
     chunked = streamed or (fit.get("chunk") and fit["method"] == "lstsq")
     data = None if chunked else stacked_signals(model, train)
+    notes: list[str] = []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if fit["method"] == "rls":
@@ -108,10 +116,47 @@ def calibrate(cfg: dict, model, train: list[Recording] | PartStream, warn=None):
         elif data is None:
             stream = train if streamed else RecordingStream.from_recordings(train, fit["chunk"])
             result = calibrate_stream(model, stream, chunk=fit["chunk"], throw=False)
-        else:
-            result = calibrate_lstsq(model, data, throw=False)
-    for w in caught:
-        (warn or (lambda msg: None))(str(w.message))
+        else:  # the starting model of hdjax discover, from the same function
+            scale = current_scale(cfg, train)
+            result = calibrate_start(
+                cfg["model"], model.joint, data, notes, scale=scale, throw=False
+            )
+    for msg in [str(w.message) for w in caught] + notes:
+        (warn or (lambda msg: None))(msg)
+    return result
+
+
+def calibrate_saved(cfg: dict, train: list[Recording] | PartStream, warn=None):
+    """Calibrate the structure of the saved model `[model] structure` names (segments, terms,
+    effects: what `hdjax discover` found) on the TRAIN recording by the residual loop's own
+    fit ([`hdjax.discover.calibrate_structure`][]); returns the fit's [`hdjax.Solution`][].
+
+    On the loop's TRAIN log this gives the loop's final model, so `hdjax run` with the
+    `experiment.toml` that `hdjax discover` writes reproduces its TEST error. Refused, in one
+    line, for a file without a compliance model, another joint's model, several TRAIN
+    recordings, or a streamed or recursive fit.
+    """
+    path = cfg["model"]["structure"]
+    fit = cfg["fit"]
+    where = f"[model] structure = {path!r}"
+    if isinstance(train, RecordingStream) or fit["method"] != "lstsq" or fit.get("chunk"):
+        raise ConfigError(
+            f"{where}: a saved structure is calibrated in memory by least squares; set [fit] "
+            'method = "lstsq" and chunk = 0, and [data] chunk = 0'
+        )
+    if len(train) != 1:
+        raise ConfigError(
+            f"{where}: a saved structure is calibrated on one TRAIN recording (the one the "
+            f"residual loop ran on); this experiment has {len(train)}: list one in [data] train"
+        )
+    saved = load_model(path)
+    if saved.compliance is None:
+        raise ConfigError(f"{where}: the file holds no compliance model (a network only)")
+    check_compatible(saved, train[0], check_angles=False)
+    notes: list[str] = []
+    result = calibrate_structure(saved.compliance, train[0], notes)
+    for msg in dict.fromkeys(notes):
+        (warn or (lambda msg: None))(msg)
     return result
 
 
