@@ -26,9 +26,7 @@ def _result() -> dict | None:
 
 
 def _missing() -> str:
-    return (
-        "*Not measured yet: run `python benchmarks/run_all.py --only bench_export.py`.*\n"
-    )
+    return "*Not measured yet: run `python benchmarks/run_all.py --only bench_export.py`.*\n"
 
 
 def _g(x: float, digits: int = 3) -> str:

@@ -285,7 +285,7 @@ def check_used(given: Mapping, model: Mapping, where: str) -> None:
     accepted)."""
     spec = SCHEMA["model"]
     if model["structure"]:
-        for key in _STRUCTURE_KEYS:
+        for key in STRUCTURE_KEYS:
             if key in given and model[key] != spec[key][0]:
                 raise ConfigError(
                     f"{where} [model] {key}: not read when structure is given (the saved "
@@ -413,7 +413,7 @@ def model_of(cfg: Mapping, joint: Joint, scale: float) -> ComplianceModel:
     return paper_model(cfg["model"], joint, scale)
 
 
-_STRUCTURE_KEYS = (
+STRUCTURE_KEYS = (  # the [model] settings that set the paper model's structure
     "n_segments",
     "poly_order",
     "kinematic",
@@ -429,7 +429,7 @@ def paper_model(table: Mapping, joint: Joint, scale: float) -> ComplianceModel:
     """The paper's model structure (Song et al. 2019, eqs. (7)-(10)) from a validated `[model]`
     table; keys it does not hold take `ComplianceModel.paper`'s defaults (a fleet manifest's
     table holds fewer). Motor currents are divided by `scale`."""
-    kw = {k: table[k] for k in _STRUCTURE_KEYS if k in table}
+    kw = {k: table[k] for k in STRUCTURE_KEYS if k in table}
     for k in ("harmonic_orders_m", "harmonic_orders_l"):
         if k in kw:
             kw[k] = tuple(kw[k])

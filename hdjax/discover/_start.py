@@ -16,20 +16,8 @@ from .._recording import Recording
 from .._solution import Solution
 from ..compliance import ComplianceModel, merge_sparse_segments
 from ..compliance._lstsq import failure_message
-from ..config._schema import paper_model
+from ..config._schema import STRUCTURE_KEYS, paper_model
 from ._pipeline import calibrate, estimate, fit_merging, has_path, pipeline_signals
-
-STRUCTURE_KEYS = (
-    "n_segments",
-    "poly_order",
-    "kinematic",
-    "fourier_order",
-    "harmonic_orders_m",
-    "harmonic_orders_l",
-    "per_segment",
-    "velocity",
-)
-"""The `[model]` settings that set the starting model's structure."""
 
 
 def structure_table(table: Mapping) -> dict:
