@@ -306,3 +306,32 @@ def test_one_log_cut_by_test_blocks_runs_whole_and_draws_its_figures(files, tmp_
     assert any("blocks of one log" in n for n in rep["notes"]), rep["notes"]
     assert rep["effects"] == ["harmonic:theta_m:2"]
     assert (out / "figures" / "spectrum_0.png").exists()
+
+
+def test_config_families_restrict_the_library(files, tmp_path, capsys):
+    # [discover] families: the loop offers only those families (here not the harmonic the logs
+    # carry, so it cannot be added and no harmonic is ranked); an unknown name is one line
+    def config(families):
+        cfg = tmp_path / "disc.toml"
+        cfg.write_text(
+            "[joint]\nratio = 160\nrated_torque = 400\n"
+            f'[data]\ntrain = "{files / "train.csv"}"\ntest = "{files / "test.csv"}"\n'
+            f"[discover]\nmax_effects = 1\nfamilies = {families}\n"
+        )
+        return cfg
+
+    out = tmp_path / "out"
+    argv = ["--config", config('["coulomb:omega_m", "viscous:omega_m"]'), "--out", out]
+    assert _discover_cli([*argv, "--quiet", "--no-figures"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    ranked = {r["key"].split(":")[0] for r in rep["last_ranking"]}
+    assert ranked and ranked <= {"coulomb", "viscous"}, ranked
+    assert not any(e.startswith("harmonic") for e in rep["effects"]), rep["effects"]
+    for bad, words in (
+        ('["harmonic:theta_x"]', ["unknown family 'harmonic:theta_x'", "harmonic:theta_m"]),
+        ('"hysteresis:torque"', ["expected a non-empty list"]),
+        ("[]", ["expected a non-empty list"]),
+    ):
+        assert _discover_cli(["--config", config(bad), "--out", tmp_path / "o2"]) == 2
+        _one_line_error(capsys, "[discover] families", *words)
+        assert not (tmp_path / "o2").exists()

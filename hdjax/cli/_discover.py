@@ -11,6 +11,7 @@ a one-line reason on stderr.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import warnings
 from pathlib import Path
@@ -218,6 +219,9 @@ def _run_into(rd, args: argparse.Namespace) -> int:
         n_segments=int(cfg.get("n_segments", DEFAULTS.n_segments)),
         poly_order=int(cfg.get("poly_order", DEFAULTS.poly_order)),
         fourier_order=int(cfg.get("fourier_order", DEFAULTS.fourier_order)),
+        library=dataclasses.replace(
+            DEFAULTS.library, families=cfg.get("families", DEFAULTS.library.families)
+        ),
         chunk=check_chunk(
             cfg.get("chunk", args.chunk), "[discover] chunk" if "chunk" in cfg else "--chunk"
         ),

@@ -100,9 +100,33 @@ def load_discover_config(path, with_context: bool = False):
         raise ConfigError(f"{path} [data]: give either 'path' or both 'train' and 'test'")
     options = doc.get("discover", {})
     check_keys(options, _DISCOVER_KEYS, f"{path} [discover]")
+    if "families" in options:
+        options = {**options, "families": check_families(options["families"], path)}
     if with_context:
         return train, test, joint, options, notes, context
     return train, test, joint, options, notes
+
+
+def check_families(value, path) -> tuple[str, ...]:
+    """`[discover] families`, checked: a non-empty list of the registered discover families
+    ([`hdjax.discover.FAMILIES`][], e.g. `"hysteresis:torque"`), each named once."""
+    from ..effects import discover_families
+
+    known = discover_families()
+    where = f"{path} [discover] families"
+    if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
+        raise ConfigError(
+            f"{where}: expected a non-empty list of family names such as "
+            f'["harmonic:theta_m", "hysteresis:torque"], got {value!r}; known: {", ".join(known)}'
+        )
+    for v in value:
+        if v not in known:
+            raise ConfigError(
+                f"{where}: unknown family {v!r}{did_you_mean(v, known)}; known: {', '.join(known)}"
+            )
+    if len(set(value)) != len(value):
+        raise ConfigError(f"{where}: a family is named twice in {value!r}")
+    return tuple(value)
 
 
 def _test_blocks(blocks, where: str) -> tuple[int, int]:
