@@ -29,3 +29,33 @@ from ._start import (
     calibrate_structure as calibrate_structure,
     fallback_tables as fallback_tables,
 )
+
+# the API page's order: the loop and its results first, then its parts
+__all__ = [
+    "discover",
+    "DiscoverOptions",
+    "DiscoveryRecord",
+    "DiscoveryStep",
+    "refit_structure",
+    "write_report",
+    "report_dict",
+    "calibrate_baseline",
+    "calibrate_start",
+    "calibrate_structure",
+    "fallback_tables",
+    "residual_spectra",
+    "OrderSpectrum",
+    "order_spectrum",
+    "spectrum_peaks",
+    "LibraryOptions",
+    "FAMILIES",
+    "Candidate",
+    "build_library",
+    "cv_gain",
+    "fold_basis",
+    "sindy_select",
+    "PipelineData",
+    "pipeline_signals",
+    "check_inputs",
+    "apparent_ratio",
+]
