@@ -474,16 +474,26 @@ def atomic_write_bytes(path, data: bytes) -> None:
         raise
 
 
+def _shortest_text(values: Float[np.ndarray, " n"]) -> np.ndarray:
+    """Each float64 as the shortest of `%.15g`, `%.16g`, `%.17g` that reads back exactly
+    (`0.004`, not `0.0040000000000000001`)."""
+    values = np.asarray(values, np.float64)
+    out = np.char.mod("%.15g", values).astype("<U32")
+    for digits in (16, 17):
+        inexact = ~(out.astype(np.float64) == values) & ~np.isnan(values)
+        if not inexact.any():
+            break
+        out[inexact] = np.char.mod(f"%.{digits}g", values[inexact])
+    return out
+
+
 def csv_bytes(columns: dict[str, Float[ArrayLike, " n"]]) -> bytes:
     """Columns (name -> values) as the bytes of a CSV file: a header of the names, then one
-    row per sample in full float64 precision (`%.17g`, which reads back exactly)."""
-    import io
-
-    buf = io.StringIO()
+    row per sample, each value in the fewest digits that read back to the same float64."""
     names = list(columns)
-    body = np.column_stack([np.asarray(columns[k]) for k in names])
-    np.savetxt(buf, body, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
-    return buf.getvalue().encode()
+    texts = [_shortest_text(columns[k]) for k in names]
+    lines = [",".join(names)] + [",".join(row) for row in zip(*texts)]
+    return ("\n".join(lines) + "\n").encode()
 
 
 def save_csv(recording: Recording, path: PathLike) -> None:

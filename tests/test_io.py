@@ -29,9 +29,28 @@ def test_round_trip(tmp_path, fmt):
     (hdjax.save_csv if fmt == "csv" else hdjax.save_npz)(rec, path)
     back = hdjax.load_recording(path)
     assert back.column_names == rec.column_names and back.source == str(path)
-    for name in rec.column_names:  # %.17g and npz are both exact in float64
+    for name in rec.column_names:  # the CSV's shortest exact digits and npz are both exact
         np.testing.assert_array_equal(np.asarray(back.column(name)), np.asarray(rec.column(name)))
     assert not list(tmp_path.glob(".*.tmp"))  # atomic writes leave no temporary behind
+
+
+def test_csv_values_in_their_shortest_exact_digits():
+    # 0.004 reads as 0.004, not %.17g's 0.0040000000000000001; every value reads back exactly
+    from hdjax._io import csv_bytes
+
+    rng = np.random.default_rng(3)
+    cols = {
+        "t": np.arange(1000) * 0.004,
+        "x": rng.normal(size=1000) * 1e3,
+        "odd": np.r_[np.nan, np.inf, -np.inf, 5e-324, 0.1 + 0.2, -0.0, np.zeros(994)],
+    }
+    text = csv_bytes(cols).decode()
+    lines = text.splitlines()
+    assert lines[0] == "t,x,odd" and lines[2].split(",")[0] == "0.004" and len(lines) == 1001
+    assert lines[5].split(",")[2] == "0.30000000000000004"
+    back = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
+    for j, values in enumerate(cols.values()):
+        np.testing.assert_array_equal(back[:, j], values)
 
 
 def test_plain_csv_without_torque_keeps_extras(tmp_path):
