@@ -34,17 +34,46 @@ def site(tmp_path_factory):
 
 
 def test_strict_build_renders_every_page(site):
+    # page.md becomes page.html (the offline plugin turns directory URLs off, so that links
+    # resolve when the site is opened from disk)
     for page in ("index", "getting-started", "residual-loop", "compliance-model", "benchmarks"):
-        assert (site / page / "index.html").is_file() or (site / f"{page}.html").is_file()
-    commands = (site / "reference" / "commands" / "index.html").read_text()
+        assert (site / f"{page}.html").is_file(), page
+    commands = (site / "reference" / "commands.html").read_text()
     assert "hdjax run" in commands and "--overwrite" in commands
-    api = (site / "reference" / "api" / "hdjax.compliance" / "index.html").read_text()
+    api = (site / "reference" / "api" / "hdjax.compliance.html").read_text()
     assert 'id="hdjax.compliance.calibrate_lstsq"' in api
-    loop = (site / "residual-loop" / "index.html").read_text()
+    loop = (site / "residual-loop.html").read_text()
     assert "generated: effect families" not in loop and "<code>hysteresis:torque</code>" in loop
     for page in site.rglob("*.html"):  # the rendered docstrings too
         text = re.sub(r"<[^>]+>", " ", page.read_text())
         assert not re.search(r"\b[Ii]ssues? #?\d+", text), page
+
+
+# a script or stylesheet from another host: `<script src=...>`, `<link href=...>` (stylesheets,
+# preconnects, preloads); plain links to papers and repositories are fine
+_EXTERNAL = re.compile(
+    r"<(?:script|link)\b[^>]*?\b(?:src|href)=[\"']?((?:https?:)?//[^\"'\s>]+)", re.I
+)
+
+
+def test_site_works_offline(site):
+    # the site is read on machines without internet, also opened straight from disk: nothing it
+    # loads comes from another host, MathJax is in it, and search has its index as a script
+    # (material's offline plugin) and its worker a shim, which a page opened as file:// can load
+    import json
+
+    external = {url for page in site.rglob("*.html") for url in _EXTERNAL.findall(page.read_text())}
+    assert not external, sorted(external)
+    page = (site / "residual-loop.html").read_text()
+    for script in ("js/mathjax/tex-svg-full.js", "js/iframe-worker/shim.js"):
+        assert f'<script src="{script}">' in page, script
+        assert (site / script).is_file(), script
+    assert (site / "js" / "mathjax" / "tex-svg-full.js").stat().st_size > 1_000_000
+    assert (site / "js" / "mathjax" / "LICENSE").is_file()
+    index = (site / "search" / "search_index.js").read_text()
+    assert index.startswith("var __index = ")
+    docs = json.loads(index.removeprefix("var __index = "))["docs"]
+    assert any(doc["location"].startswith("residual-loop.html") for doc in docs)
 
 
 def test_config_reference_lists_every_schema_key():

@@ -7,14 +7,18 @@
 - Navigation entries whose page does not exist are dropped (with a note in the build log), and
   every page under docs/ that the navigation does not list is appended under "More", so a page
   added to docs/ is always reachable.
+- MathJax comes with the site (`MATHJAX`, from the django-static-mathjax package of the docs
+  extra, which ships MathJax 3 and nothing else), so the maths renders without internet.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import logging
 import sys
 from pathlib import Path
 
+from mkdocs.exceptions import PluginError
 from mkdocs.structure.files import File
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -25,6 +29,26 @@ import reference  # noqa: E402
 log = logging.getLogger("mkdocs.hooks.hdjax")
 
 GENERATED: dict[str, str] = {}
+
+# MathJax 3 with every TeX extension and SVG output in one file: it loads no fonts and nothing
+# else, so it works from disk too; its Apache-2.0 licence travels with it
+MATHJAX = {
+    "js/mathjax/tex-svg-full.js": "static/mathjax/es5/tex-svg-full.js",
+    "js/mathjax/LICENSE": "static/mathjax/LICENSE",
+}
+
+
+def _mathjax_files(config) -> list[File]:
+    spec = importlib.util.find_spec("mathjax")
+    root = Path(spec.origin).parent if spec and spec.origin else None
+    if root is None or not all((root / src).is_file() for src in MATHJAX.values()):
+        raise PluginError(
+            "MathJax not found: the site bundles it from the django-static-mathjax package; "
+            "install the docs extra (pip install -e '.[dev,docs]')"
+        )
+    return [
+        File.generated(config, uri, abs_src_path=str(root / src)) for uri, src in MATHJAX.items()
+    ]
 
 
 def _generated_pages() -> dict[str, str]:
@@ -115,4 +139,6 @@ def on_page_markdown(markdown, page, config, files):
 def on_files(files, config):
     for path, text in GENERATED.items():
         files.append(File.generated(config, path, content=text))
+    for file in _mathjax_files(config):
+        files.append(file)
     return files
