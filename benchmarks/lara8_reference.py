@@ -107,8 +107,10 @@ def whole_log(exp) -> dict:
     }
 
 
-def held_out(exp, seeds: int) -> dict:
-    """Every method calibrated on the calibration blocks, scored on the held-out blocks."""
+def deformation_rows(exp) -> tuple[dict, dict]:
+    """The deterministic rows of the held-out table (the compliance model as configured, the
+    residual loop's start and end, the current-based torque), and the per-row curves the
+    figure draws. A test recomputes these to check the page is not stale."""
     from hdjax.discover import DiscoverOptions, discover
 
     ds = build_dataset(exp)
@@ -151,6 +153,23 @@ def held_out(exp, seeds: int) -> dict:
     final_est = res.aux.steps[-1].torque_estimate if res.aux.steps else res.aux.baseline_estimate
     rows["song_discover_final"] = _err(final_est, ref)
     rows["song_discover_final"]["effects"] = list(res.aux.effects)
+    rows["current"] = _err(np.asarray(test.current), ref)
+    curves = {
+        "reference": ref,
+        "as configured": np.asarray(est.torque),
+        "after discover": np.asarray(final_est),
+        "current-based": np.asarray(test.current),
+    }
+    extra = {"train": train, "test": test, "ds": ds, "notes": list(res.aux.notes)}
+    return rows, {"curves": curves, **extra}
+
+
+def held_out(exp, seeds: int) -> dict:
+    """Every method calibrated on the calibration blocks, scored on the held-out blocks."""
+    rows, kept = deformation_rows(exp)
+    ds, train, test = kept["ds"], kept["train"], kept["test"]
+    joint, test_name = ds.joint, next(iter(ds.test))
+    ref = kept["curves"]["reference"]
     # -- the network, over several seeds ------------------------------------------------------
     nets = []
     for seed in range(seeds):
@@ -162,8 +181,6 @@ def held_out(exp, seeds: int) -> dict:
     rows["network"]["rms_range"] = [min(n["rms"] for n in nets), max(n["rms"] for n in nets)]
     rows["network"]["seeds"] = seeds
     rows["network"]["n"] = nets[0]["n"]
-    # -- the current-based torque -------------------------------------------------------------
-    rows["current"] = _err(np.asarray(test.current), ref)
     tw = np.asarray(hdjax.twist(train.theta_m, train.theta_l, joint.ratio, joint.twist_sign))
     corr = {
         "twist_vs_reference": float(np.corrcoef(tw, np.asarray(train.torque))[0, 1]),
@@ -174,9 +191,36 @@ def held_out(exp, seeds: int) -> dict:
         "n_train": train.n_samples,
         "n_test": test.n_samples,
         "reference": ds.reference["description"],
-        "discover_notes": list(res.aux.notes),
+        "discover_notes": kept["notes"],
         "correlation_train": corr,
+        "_curves": kept["curves"],
     }
+
+
+FIGURE = "img/lara8_reference_held_out.png"
+"""The held-out figure, relative to docs/."""
+
+
+def held_out_figure(curves: dict, path: Path) -> None:
+    """Estimate against reference on the held-out rows, one panel per method, with y = x."""
+    from hdjax._plotting import fixed_margins, pyplot, save_figure
+
+    plt = pyplot()
+    ref = np.asarray(curves["reference"])
+    methods = {k: v for k, v in curves.items() if k != "reference"}
+    lo, hi = float(ref.min()), float(ref.max())
+    fig, axes = plt.subplots(1, len(methods), figsize=(2.6 * len(methods), 3.0), sharey=True)
+    for ax, (name, est) in zip(axes, methods.items(), strict=True):
+        e = np.asarray(est) - ref
+        ax.plot([lo, hi], [lo, hi], color="gray", lw=0.8)
+        ax.scatter(ref, np.asarray(est), s=4, alpha=0.6)
+        ax.set_title(f"{name}\nRMS {np.sqrt(np.mean(e**2)):.2f} N·m", fontsize=9)
+        ax.set_xlabel("reference [N·m]")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("estimate [N·m]")
+    fixed_margins(fig, left=0.7, bottom=0.55, top=0.5, wspace=0.12)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    save_figure(fig, path)
 
 
 def page(result: dict) -> str:
@@ -239,6 +283,11 @@ def page(result: dict) -> str:
             net,
         ),
         line("current-based torque `joint_torque_current_3`", cur),
+        "",
+        f"![Estimate against reference on the held-out rows, per method]({FIGURE})",
+        "",
+        "*Each point is one held-out row; the grey line is estimate = reference. Drawn with this "
+        "page by `python benchmarks/lara8_reference.py`.*",
         "",
         "## The same comparison over the whole log",
         "",
@@ -333,6 +382,7 @@ def main():
     result["wall_s"] = time.perf_counter() - t0
     from hdjax._io import atomic_write_bytes
 
+    held_out_figure(result["held_out"].pop("_curves"), REPO / "docs" / FIGURE)
     atomic_write_bytes(args.docs, page(result).encode())
     print(json.dumps(result, indent=2))
 
