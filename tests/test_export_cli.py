@@ -127,6 +127,7 @@ def test_a_term_without_c_code_is_refused_in_one_line_and_nothing_is_written(tmp
         ("inside_input", "lies inside the input"),
         ("foreign_folder", "not an hdjax result folder"),
         ("no_model", "no such model file"),
+        ("not_a_model", "not an hdjax model file"),
         ("columns_without_data", "give --data too"),
     ],
 )
@@ -143,6 +144,9 @@ def test_bad_input_is_one_line_and_exit_2(case, expect, models, tmp_path, capsys
         (out / "notes.txt").write_text("mine")
     elif case == "no_model":
         model = tmp_path / "absent.json"
+    elif case == "not_a_model":
+        model = tmp_path / "other.json"
+        model.write_text('{"a": 1}')
     elif case == "columns_without_data":
         extra = ["--columns", str(tmp_path / "map.toml")]
     assert main(["export", "--model", str(model), "--out", str(out), *extra]) == 2

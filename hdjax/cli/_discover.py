@@ -11,7 +11,6 @@ a one-line reason on stderr.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import warnings
 from pathlib import Path
@@ -27,7 +26,7 @@ from .._memory import check_read_memory
 from ..discover import _loop  # `_loop.discover` looked up at call time, where a test stops it
 from ..discover._checks import check_inputs
 from ..discover._chunked import check_chunk
-from ..discover._config import load_discover_config
+from ..discover._config import discover_options, load_discover_config
 from ..discover._experiment import experiment_toml
 from ..discover._options import DiscoverOptions
 from ..discover._report import write_report_into
@@ -156,14 +155,6 @@ def run(args: argparse.Namespace) -> int:
         return _run_into(rd, args)
 
 
-def _setting(given, cfg: dict, key: str, kind):
-    """A loop setting: the command line's when given, else the config's, else the loop's own
-    default ([`hdjax.discover.DiscoverOptions`][])."""
-    if given is not None:
-        return kind(given)
-    return kind(cfg.get(key, getattr(DEFAULTS, key)))
-
-
 def _experiment(args, joint, context_split: bool) -> tuple[str, str]:
     """The `experiment.toml` text that reproduces the final model with `hdjax run`, or `""`
     and why there is none."""
@@ -213,15 +204,10 @@ def _run_into(rd, args: argparse.Namespace) -> int:
     say = (lambda s: None) if args.quiet else (lambda s: print(f"[discover] {s}", file=sys.stderr))
     for w in caught:
         say(f"warning: {w.message}")
-    options = DiscoverOptions(
-        max_effects=_setting(args.max_effects, cfg, "max_effects", int),
-        min_gain=_setting(args.min_gain, cfg, "min_gain", float),
-        n_segments=int(cfg.get("n_segments", DEFAULTS.n_segments)),
-        poly_order=int(cfg.get("poly_order", DEFAULTS.poly_order)),
-        fourier_order=int(cfg.get("fourier_order", DEFAULTS.fourier_order)),
-        library=dataclasses.replace(
-            DEFAULTS.library, families=cfg.get("families", DEFAULTS.library.families)
-        ),
+    options = discover_options(
+        cfg,
+        max_effects=args.max_effects,
+        min_gain=args.min_gain,
         chunk=check_chunk(
             cfg.get("chunk", args.chunk), "[discover] chunk" if "chunk" in cfg else "--chunk"
         ),

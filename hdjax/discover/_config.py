@@ -23,6 +23,7 @@ chunk = 0                            # > 0: fits accumulated over chunks of this
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +32,7 @@ from .._errors import ConfigError, check_keys, did_you_mean
 from .._io import ColumnMap, read_toml
 from .._joint import Joint
 from ..reference import load_referenced
+from ._options import DiscoverOptions
 
 _DATA_KEYS = ("path", "train", "test", "test_blocks", "columns", "extras", "encoding", "reference")
 _DISCOVER_KEYS = (
@@ -105,6 +107,28 @@ def load_discover_config(path, with_context: bool = False):
     if with_context:
         return train, test, joint, options, notes, context
     return train, test, joint, options, notes
+
+
+def discover_options(
+    cfg: dict, *, max_effects: int | None = None, min_gain: float | None = None, chunk: int = 0
+) -> DiscoverOptions:
+    """The loop's settings from a discover file's `[discover]` table (as
+    [`load_discover_config`][] returns it): `max_effects` and `min_gain` when given (the
+    command line's) override the table's, and what neither sets is
+    [`hdjax.discover.DiscoverOptions`][]' default."""
+    d = DiscoverOptions()
+    pick = lambda given, key, kind: kind(
+        given if given is not None else cfg.get(key, getattr(d, key))
+    )
+    return DiscoverOptions(
+        max_effects=pick(max_effects, "max_effects", int),
+        min_gain=pick(min_gain, "min_gain", float),
+        n_segments=pick(None, "n_segments", int),
+        poly_order=pick(None, "poly_order", int),
+        fourier_order=pick(None, "fourier_order", int),
+        library=dataclasses.replace(d.library, families=cfg.get("families", d.library.families)),
+        chunk=chunk,
+    )
 
 
 def check_families(value, path) -> tuple[str, ...]:
