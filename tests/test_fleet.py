@@ -3,7 +3,6 @@
 import json
 import os
 import socket
-import time
 
 import numpy as np
 import pytest
@@ -227,7 +226,7 @@ def _one_line(capsys, *words):
     return err
 
 
-def test_fleet_bad_scheduler_is_one_line_and_quick(tmp_path, capsys):
+def test_fleet_bad_scheduler_is_one_line_and_quick(tmp_path, capsys, monkeypatch):
     rec = synthetic_recording(hdjax.Joint(ratio=160.0, rated_torque=400.0), 200, seed=1)
     hdjax.save_csv(rec, tmp_path / "a.csv")
     joints = {"j": (160.0, 400.0, [("a.csv", DATES[0])], None)}
@@ -235,9 +234,13 @@ def test_fleet_bad_scheduler_is_one_line_and_quick(tmp_path, capsys):
     out = tmp_path / "out"
     run = lambda *a: main(["fleet", manifest, "--out", str(out), *a])  # noqa: E731
     nobody = f"tcp://127.0.0.1:{_free_port()}"
-    t0 = time.perf_counter()
+    import distributed
+
+    asked, real = [], distributed.Client
+    monkeypatch.setattr(distributed, "Client", lambda *a, **k: asked.append(k) or real(*a, **k))
     assert run("--scheduler", nobody, "--connect-timeout", "1") == 2
-    assert time.perf_counter() - t0 < 10  # the 1 s timeout, not the 20 s default
+    # the client is given the 1 s of --connect-timeout, not the 20 s default
+    assert [k.get("timeout") for k in asked] == ["1.0s"], asked
     _one_line(capsys, nobody, "cannot connect", "--connect-timeout")
     assert not out.exists()
     for address in ("nonsense", "127.0.0.1", "foo://127.0.0.1:8786"):
