@@ -1,6 +1,7 @@
 """`hdjax discover` through the command line: the contract and every bad input of issue 6."""
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -73,6 +74,24 @@ def test_contract_report(files, csv_report):
     err = est - np.asarray(test.torque)
     assert rep["final"]["rms"] == pytest.approx(np.sqrt(np.mean(err**2)), rel=1e-9)
     assert rep["final"]["max"] == pytest.approx(np.max(np.abs(err)), rel=1e-9)
+
+
+def test_min_gain_above_the_effects_gain_adds_nothing(files, csv_report, tmp_path):
+    # --min-gain sets the least cross-validated twist gain: above the gain of the effect the
+    # default run adds, the same logs add no effect, and the stopping rule states the value
+    gain = csv_report["steps"][0]["cv_gain"]  # about 0.996: the harmonic is the whole error
+    assert csv_report["effects"] == ["harmonic:theta_m:2"] and 0.05 < gain < 0.999, gain
+    min_gain = math.ceil(1000 * (gain + 1) / 2) / 1000  # above the gain, below 1
+    assert gain < min_gain < 1
+    out = tmp_path / "out"
+    assert _run(files, out, "--no-figures", "--min-gain", min_gain) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["effects"] == [] and rep["steps"] == [], rep["effects"]
+    assert rep["final"]["rms"] == rep["baseline"]["rms"]
+    rule = f"removes at least {min_gain:.0%} (min_gain)"  # the rule prints whole percents
+    assert rule in rep["stopping_rule"], rep["stopping_rule"]
+    assert rule in (out / "report.md").read_text()
+    assert "removes at least 5% (min_gain)" in csv_report["stopping_rule"]  # the default
 
 
 def test_parquet_inputs_equal_csv(files, csv_report, tmp_path):
@@ -289,6 +308,10 @@ def test_report_markdown_notes_once_under_a_heading_and_narrow_tables():
     rows = [line for line in md.splitlines() if line.startswith("|")]
     assert max(line.count("|") - 1 for line in rows) <= 6  # no table wider than 6 columns
     assert "20 arcsec [19, 21]" in md  # the details are still there, in the second table
+    # an effect whose coefficient is its physical parameter (a skew's delay) shows it, in ms
+    skew = dict(amplitude | {"delay_ms": 2.13, "delay_ms_ci95": [2.05, 2.2]}, effect="skew")
+    md = report_markdown(d | {"steps": [dict(step, effect="skew:encoders", amplitude=skew)]}, [])
+    assert "| delay 2.13 ms [2.05, 2.2]; 20 arcsec [19, 21]" in md
 
 
 def test_one_log_cut_by_test_blocks_runs_whole_and_draws_its_figures(files, tmp_path):

@@ -216,7 +216,7 @@ def report_markdown(d: dict, figures: list[tuple[str, str]], use: str | None = N
     details = []
     for i, s in enumerate(d["steps"], 1):
         a = s.get("amplitude") or {}
-        amp = (
+        amp = _parameter_text(a) + (
             f"{a['arcsec']:.3g} arcsec [{a['arcsec_ci95'][0]:.3g}, {a['arcsec_ci95'][1]:.3g}]; "
             f"{a['nm']:.3g} N·m [{a['nm_ci95'][0]:.3g}, {a['nm_ci95'][1]:.3g}]"
             if a
@@ -263,6 +263,19 @@ def report_markdown(d: dict, figures: list[tuple[str, str]], use: str | None = N
     if use is not None:
         lines += _use_lines(use, d)
     return "\n".join(lines)
+
+
+def _parameter_text(a: dict) -> str:
+    """An effect's own physical parameter with its interval, where its coefficient is one (an
+    encoder skew's delay: `delay_ms` -> "delay 2.1 ms [1.9, 2.3]; "), else ""."""
+    out = ""
+    for key in a:
+        if key in ("arcsec", "nm") or key + "_ci95" not in a or "_" not in key:
+            continue
+        name, unit = key.rsplit("_", 1)
+        lo, hi = a[key + "_ci95"]
+        out += f"{name} {a[key]:.3g} {unit} [{lo:.3g}, {hi:.3g}]; "
+    return out
 
 
 def _checks_lines(d: dict) -> list[str]:
