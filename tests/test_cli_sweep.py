@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from hdjax import RESULTS, Joint
 from hdjax.cli import main
@@ -161,6 +162,53 @@ def test_interrupted_sweep_resumes(tmp_path, monkeypatch, capsys):
     m = json.loads((out / "metrics.json").read_text())
     assert [r["value"] for r in m["members"]] == [1, 3, 5]
     assert not (tmp_path / "seg.partial").exists()
+
+
+def test_fresh_ignores_cached_member_results(tmp_path, monkeypatch, capsys):
+    """A member result left in OUT.partial by an interrupted sweep is taken as it is by the next
+    run (here a doctored one: its error numbers changed), and computed again with --fresh."""
+    import shutil
+
+    from hdjax.cli import _sweep
+
+    cfg = tmp_path / "sw.toml"
+    cfg.write_text(CONFIG)
+    argv = ["sweep", str(cfg), "--setting", "model.n_segments", "--values", "1,3"]
+    real = _sweep._member_loop
+    calls = []
+
+    def interrupted(*a, **k):
+        calls.append(a[0]["model"]["n_segments"])
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(_sweep, "_member_loop", interrupted)
+    assert main([*argv, "--out", str(tmp_path / "a"), "-q"]) == 130
+    (member,) = (tmp_path / "a.partial" / "members").iterdir()
+    cached = json.loads(member.read_text())
+    true_rms = cached["result"]["rms"]
+    cached["result"].update(rms=123.25, max=456.5)
+    member.write_text(json.dumps(cached))
+    shutil.copytree(tmp_path / "a.partial", tmp_path / "b.partial")  # the same, for --fresh
+    monkeypatch.setattr(_sweep, "_member_loop", lambda *a, **k: calls.append(a) or real(*a, **k))
+    capsys.readouterr()
+
+    calls.clear()
+    assert main([*argv, "--out", str(tmp_path / "a")]) == 0
+    assert "resuming: 1 of 2 members cached" in capsys.readouterr().err
+    assert len(calls) == 1  # only the member not cached
+    (first, second) = json.loads((tmp_path / "a" / "metrics.json").read_text())["members"]
+    assert (first["rms"], first["max"]) == (123.25, 456.5)  # the cached numbers, as they were
+
+    calls.clear()
+    assert main([*argv, "--out", str(tmp_path / "b"), "--fresh"]) == 0
+    (first_b, second_b) = json.loads((tmp_path / "b" / "metrics.json").read_text())["members"]
+    assert first_b["rms"] == pytest.approx(true_rms, rel=1e-9) and first_b["max"] != 456.5
+    assert "resuming" not in capsys.readouterr().err
+    assert len(calls) == 2  # both members computed
+    assert second_b["rms"] == pytest.approx(second["rms"], rel=1e-9)
+    assert not (tmp_path / "b.partial").exists()
 
 
 def test_sweep_over_unknown_setting(tmp_path, capsys):

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import hdjax
+from hdjax._lazy import dask_distributed
 from hdjax._metrics import error_metrics
 from hdjax.cli import main
 from hdjax.cli._fleet import WORKER_ENV
@@ -234,8 +235,7 @@ def test_fleet_bad_scheduler_is_one_line_and_quick(tmp_path, capsys, monkeypatch
     out = tmp_path / "out"
     run = lambda *a: main(["fleet", manifest, "--out", str(out), *a])  # noqa: E731
     nobody = f"tcp://127.0.0.1:{_free_port()}"
-    import distributed
-
+    distributed = dask_distributed()  # the module the command takes its Client from
     asked, real = [], distributed.Client
     monkeypatch.setattr(distributed, "Client", lambda *a, **k: asked.append(k) or real(*a, **k))
     assert run("--scheduler", nobody, "--connect-timeout", "1") == 2
@@ -257,3 +257,94 @@ def test_fleet_bad_scheduler_is_one_line_and_quick(tmp_path, capsys, monkeypatch
     assert run("--connect-timeout", "5") == 2
     _one_line(capsys, "--connect-timeout applies to --scheduler only")
     assert not out.exists()
+
+
+# -- --fresh and --no-pin ------------------------------------------------------------------------
+
+
+def _two_logs(tmp_path):
+    """A calibrate manifest of one joint with two small logs."""
+    joint = hdjax.Joint(ratio=160.0, rated_torque=400.0)
+    logs = []
+    for k, date in enumerate(DATES[:2]):
+        hdjax.save_csv(synthetic_recording(joint, 1500, seed=70 + k), tmp_path / f"{date}.csv")
+        logs.append((f"{date}.csv", date))
+    return _manifest(tmp_path, "calibrate", {"j": (160.0, 400.0, logs, None)})
+
+
+def test_fleet_fresh_reruns_tasks_that_finished_before(tmp_path, scheduler, capsys):
+    # a finished task's row (OUT/tasks/ID.json, here doctored) is taken as it is by the next
+    # run, and computed again with --fresh
+    address, pids = scheduler
+    manifest, out = str(_two_logs(tmp_path)), tmp_path / "out"
+
+    def run(*flags):
+        return main(["fleet", manifest, "--out", str(out), "--scheduler", address, *flags])
+
+    assert run("-q") == 0, capsys.readouterr().err
+    first = pq.read_table(out / "results.parquet").to_pylist()
+    assert [r["n_samples"] for r in first] == [1500, 1500]
+    task = out / "tasks" / f"{first[0]['task_id']}.json"
+    row = json.loads(task.read_text())
+    row.update(n_samples=1234, twist_rms_arcsec=98.75)
+    task.write_text(json.dumps(row))
+    capsys.readouterr()
+
+    assert run("--overwrite") == 0
+    assert "2 of 2 tasks finished before; skipped" in capsys.readouterr().err
+    reused = pq.read_table(out / "results.parquet").to_pylist()
+    assert [(r["n_samples"], r["twist_rms_arcsec"]) for r in reused] == [
+        (1234, 98.75), (1500, first[1]["twist_rms_arcsec"])
+    ]  # fmt: skip
+
+    assert run("--overwrite", "--fresh") == 0
+    rerun = pq.read_table(out / "results.parquet").to_pylist()
+    assert [r["n_samples"] for r in rerun] == [1500, 1500]
+    for r, f in zip(rerun, first):
+        assert r["status"] == "ok" and r["worker_pid"] in pids
+        np.testing.assert_allclose(r["twist_rms_arcsec"], f["twist_rms_arcsec"], rtol=1e-12)
+    assert json.loads(task.read_text())["n_samples"] == 1500  # the task's own file too
+    err = capsys.readouterr().err
+    assert "finished before" not in err and "2/2 done, 0 running, 0 failed" in err
+
+
+def test_fleet_pins_the_local_workers_unless_no_pin(tmp_path, scheduler, monkeypatch, capsys):
+    # the local cluster is built as asked, then each of its workers bound to a core; not with
+    # --no-pin. The cluster and the binding are stood in for (the tasks run on the test's
+    # cluster); what the command asks of them is recorded
+    from types import SimpleNamespace
+
+    from hdjax.cli import _fleet
+
+    address, pids = scheduler
+    clusters, pinned = [], []
+
+    class LocalCluster:
+        def __init__(self, **kwargs):
+            clusters.append(kwargs)
+
+        def close(self):
+            pass
+
+    def client(cluster):
+        assert isinstance(cluster, LocalCluster)
+        return distributed.Client(address)
+
+    fake = SimpleNamespace(
+        LocalCluster=LocalCluster, Client=client, as_completed=distributed.as_completed
+    )
+    monkeypatch.setattr(_fleet, "dask_distributed", lambda: fake)
+    monkeypatch.setattr(_fleet, "_pin", lambda c: pinned.append(c.scheduler.address))
+    manifest = str(_two_logs(tmp_path))
+    for k, flags in enumerate([[], ["--no-pin"]]):
+        out = tmp_path / f"out{k}"
+        assert main(["fleet", manifest, "--out", str(out), "--workers", "3", "-q", *flags]) == 0
+        rows = pq.read_table(out / "results.parquet").to_pylist()
+        assert [r["status"] for r in rows] == ["ok", "ok"]
+        assert all(r["worker_pid"] in pids for r in rows)
+    # one worker per task (2 tasks, --workers 3), single-threaded processes with WORKER_ENV
+    assert [(c["n_workers"], c["threads_per_worker"], c["processes"]) for c in clusters] == [
+        (2, 1, True), (2, 1, True)
+    ]  # fmt: skip
+    assert all(c["env"] == WORKER_ENV for c in clusters)
+    assert pinned == [address]  # by default only, not with --no-pin

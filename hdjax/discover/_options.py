@@ -38,18 +38,23 @@ class DiscoverOptions:
         check_chunk(self.chunk)
 
 
+def _percent(fraction: float) -> str:
+    """A setting as a percentage with the digits it was given (0.05 -> 5%, 0.998 -> 99.8%)."""
+    return f"{100 * fraction:.4g}%"
+
+
 def stopping_rule(options: DiscoverOptions) -> str:
     """The loop's stopping rule in words, with the values `options` gives it (the report's
     `stopping_rule`, and the module docstring of [`hdjax.discover._loop`][] in general)."""
     o = options
     return (
         f"a candidate is eligible when pysindy STLSQ selects it (threshold {o.sindy_threshold:g}) "
-        f"and it removes at least {o.min_gain:.0%} (min_gain) of the model's cross-validated "
+        f"and it removes at least {_percent(o.min_gain)} (min_gain) of the model's cross-validated "
         f"twist error ({o.n_folds} folds of whole contiguous blocks of TRAIN) in the standard "
-        f"fold assignment and in at least {o.min_stability:.0%} (min_stability) of "
+        f"fold assignment and in at least {_percent(o.min_stability)} (min_stability) of "
         f"{o.n_resamples} resampled ones; of the {o.n_shortlist} best eligible candidates, those "
         "that lower the cross-validated torque error (whole pipeline per fold: calibration, then "
-        f"inversion) by at least {o.min_torque_gain:.0%} (min_torque_gain) qualify, and the "
+        f"inversion) by at least {_percent(o.min_torque_gain)} (min_torque_gain) qualify, and the "
         "lowest is added, or one with fewer columns within one standard error of it (paired "
         f"over the held-out blocks); stop when none qualifies, or after {o.max_effects} effects "
         "(max_effects)"
