@@ -302,3 +302,147 @@ def test_the_check_program_passes_its_vectors_and_fails_a_wrong_one(tmp_path, co
     (tmp_path / "wrong.csv").write_text("\n".join(lines) + "\n")
     done = run("wrong.csv")
     assert done.returncode == 1 and "FAIL" in done.stdout and "(sample 299)" in done.stdout
+
+
+# ---------------------------------------------------------------------------------------------
+# Encoder counts in: hdjax_sample_from_counts equals hdjax's reader of a count column
+
+CPR_M, CPR_L = 2**23, 2**19  # a 23-bit motor and a 19-bit load encoder
+BASE_M = 2**31 - 160_000_000  # multi-turn motor counts that cross 2^31 (int64, no wrap)
+BASE_L = -123_456  # load counts below zero
+
+
+def _counts_code(model, precision="double"):
+    return export.counts_c(export.compliance_c(model, precision=precision), CPR_M, CPR_L)
+
+
+def _counts_log(case: Case, path, motor_offset, load_offset):
+    """The case's recording as a log of integer counts (a CSV with count columns, the offsets
+    chosen so that the twist, and so the torque sweep, stays that of the case), its column map
+    and the counts."""
+    r = case.recording
+    rad_m, rad_l = 2 * np.pi / CPR_M, 2 * np.pi / CPR_L
+    ratio = JOINT.ratio
+    # without offsets the load counts start where the motor's do, geared down (absolute
+    # multi-turn encoders of an unloaded joint): the twist moves by under one load count
+    base_l = BASE_L if motor_offset or load_offset else round(BASE_M * rad_m / ratio / rad_l)
+    c_m = np.floor(np.asarray(r.theta_m) / rad_m).astype(np.int64) + BASE_M
+    c_l = np.floor(np.asarray(r.theta_l) / rad_l).astype(np.int64) + base_l
+    spec = {}
+    if motor_offset == "first":  # load offset (rad) that keeps the twist
+        off = -BASE_L * rad_l - float(r.theta_m[0]) / ratio
+        spec = {"theta_m": "first", "theta_l": off}
+    elif load_offset == "first":
+        off = -BASE_M * rad_m - ratio * float(r.theta_l[0])
+        spec = {"theta_m": off, "theta_l": "first"}
+    else:
+        spec = {"theta_m": None, "theta_l": None}
+    columns = {}
+    for name, source, cpr in (("theta_m", "enc_m", CPR_M), ("theta_l", "enc_l", CPR_L)):
+        columns[name] = {"source": source, "counts_per_rev": cpr}
+        if spec[name] is not None:
+            columns[name]["offset"] = spec[name]
+    cmap = hdjax.ColumnMap.from_dict({"columns": columns})
+    t, cur, temp = (np.asarray(a) for a in (r.t, r.current, r.extras["temperature"]))
+    rows = [
+        f"{a!r},{m},{lo},{c!r},{k!r}"
+        for a, m, lo, c, k in zip(
+            t.tolist(), c_m.tolist(), c_l.tolist(), cur.tolist(), temp.tolist()
+        )
+    ]
+    path.write_text("t,enc_m,enc_l,current,temperature\n" + "\n".join(rows) + "\n")
+    return cmap, c_m, c_l, spec
+
+
+@pytest.mark.parametrize(
+    "motor_offset, load_offset",
+    [("first", "number"), ("number", "first"), (None, None)],
+    ids=["motor_first_load_rad", "motor_rad_load_first", "no_offset_null"],
+)
+def test_c_from_counts_equals_the_jax_estimate_of_the_counts_log(
+    motor_offset, load_offset, model_cases, tmp_path, compiler
+):
+    case = model_cases["every_effect"]
+    cmap, c_m, c_l, spec = _counts_log(case, tmp_path / "counts.csv", motor_offset, load_offset)
+    assert c_m.min() < 2**31 < c_m.max(), "the motor counts cross 2^31"
+    assert c_l.min() < 0 or motor_offset is None, "the load counts cross zero"
+    rec = hdjax.load_recording(tmp_path / "counts.csv", cmap)  # hdjax's reader
+    # the chunked reader (the map's "first" carried across chunks) reads the same angles
+    chunked = hdjax.load_recording(tmp_path / "counts.csv", cmap, chunk=7777)
+    np.testing.assert_array_equal(np.asarray(chunked.theta_m), np.asarray(rec.theta_m))
+    np.testing.assert_array_equal(np.asarray(chunked.theta_l), np.asarray(rec.theta_l))
+    model = case.kw["model"]
+    want, want_flags = export.expected(rec, JOINT, model=model)
+    assert np.ptp(want) > 1.5 * JOINT.rated_torque  # the counts sweep the segments
+    lib = export.build_library(_counts_code(model), tmp_path, extra=("-pedantic",))
+    x = lib.samples(rec)
+    x[:, 1:3] = np.nan  # the angles come from the counts only
+    zero, offset = None, (0.0, 0.0)
+    if motor_offset is not None:
+        zero = tuple(int(c[0]) if spec[k] == "first" else 0 for k, c in zip(spec, (c_m, c_l)))
+        offset = tuple(0.0 if spec[k] == "first" else spec[k] for k in spec)
+    torque, flags, stepped = lib.run_counts(x, c_m, c_l, zero=zero, offset=offset)
+    err = np.abs(torque - want)
+    print(f"counts ({motor_offset}, {load_offset}): {N} samples, max |C - JAX| = {err.max():.3g}")
+    assert err.max() <= 1e-9, (err.max(), int(err.argmax()))
+    np.testing.assert_array_equal(flags, want_flags)
+    # and the angles the C code made of the counts are the reader's, to the bit
+    np.testing.assert_array_equal(stepped[:, 1], np.asarray(rec.theta_m))
+    np.testing.assert_array_equal(stepped[:, 2], np.asarray(rec.theta_l))
+
+
+def test_the_count_conversion_is_the_readers_at_extreme_counts(tmp_path, compiler):
+    # single precision (angles stay double); counts up to 2^53, negative, odd resolutions
+    model = MODELS["paper_shared"]()
+    code = export.counts_c(export.compliance_c(model, precision="single"), 5**11, 3 * 2**20)
+    lib = export.build_library(code, tmp_path, extra=("-pedantic",))
+    c_m = np.array([2**53, 2**53 - 1, -(2**53), 2**40 + 12345, 2**32 + 1, 2**31, -1, 0, 7])
+    c_l = np.array([-(2**50) - 3, 2**31 - 1, 2**45 + 1, -(2**33), 1, 0, 2**52 + 11, 5, -7])
+    x = np.zeros((c_m.size, 4))
+    x[:, 0] = np.arange(c_m.size) * 1e-3
+    for off_m, off_l in [(None, None), ("first", 0.25), (0.5, "first"), (-1e3, 2e-7)]:
+        specs = [
+            hdjax.ColumnMap.from_dict({"columns": {"theta_m": e}}).columns["theta_m"]
+            for e in (
+                {"source": "a", "counts_per_rev": 5**11, **({"offset": off_m} if off_m else {})},
+                {
+                    "source": "b",
+                    "counts_per_rev": 3 * 2**20,
+                    **({"offset": off_l} if off_l else {}),
+                },
+            )
+        ]
+        want_m, want_l = specs[0].apply(c_m), specs[1].apply(c_l)
+        zero = (int(c_m[0]) if off_m == "first" else 0, int(c_l[0]) if off_l == "first" else 0)
+        rad = tuple(0.0 if v in (None, "first") else v for v in (off_m, off_l))
+        _, _, stepped = lib.run_counts(
+            x, c_m, c_l, zero=None if off_m is None else zero, offset=rad
+        )
+        np.testing.assert_array_equal(stepped[:, 1], want_m, err_msg=f"motor {off_m}")
+        np.testing.assert_array_equal(stepped[:, 2], want_l, err_msg=f"load {off_l}")
+    assert "#define HDJAX_COUNTS_PER_REV_M 48828125LL" in code.header
+    assert f"#define HDJAX_RAD_PER_COUNT_L {2 * np.pi / (3 * 2**20)!r}" in code.header
+
+
+def test_counts_per_rev_come_from_the_joint_or_the_options():
+    from hdjax.config import SavedModel
+
+    bits = dataclasses.replace(JOINT, encoder_bits_motor=21, encoder_bits_load=19)
+    model = MODELS["paper_shared"]()
+    header = lambda joint, **kw: export.export_files(  # noqa: E731
+        SavedModel(joint, model, None, {}, {}), n_vectors=10, **kw
+    )["hdjax_estimator.h"].decode()
+    h = header(bits)
+    assert "#define HDJAX_COUNTS_PER_REV_M 2097152LL" in h and "encoder_bits_motor = 21" in h
+    assert "#define HDJAX_COUNTS_PER_REV_L 524288LL" in h
+    h = header(bits, counts_per_rev_l=4096)  # an option overrides the joint
+    assert "HDJAX_COUNTS_PER_REV_L 4096LL" in h and "--counts-per-rev-l 4096" in h
+    assert "HDJAX_COUNTS_PER_REV_M 2097152LL" in h
+    files = export.export_files(SavedModel(JOINT, model, None, {}, {}), n_vectors=10)
+    assert "hdjax_sample_from_counts" not in files["hdjax_estimator.h"].decode()
+    assert "--counts-per-rev-m N --counts-per-rev-l N" in files["README.md"].decode()
+    with pytest.raises(hdjax.ConfigError, match="load encoder's resolution is unknown"):
+        header(JOINT, counts_per_rev_m=4096)
+    for bad in (0, -5, 2.5, True, "12x", 2**53 + 1):
+        with pytest.raises(hdjax.ConfigError, match="whole number of encoder counts"):
+            export.check_counts_per_rev(bad, "--counts-per-rev-m")

@@ -1,13 +1,14 @@
 """`hdjax export`: the files it writes, and bad input answered with one line, exit code 2 and
 nothing written (the output rules of every command, see docs/cli-safety.md)."""
 
+import dataclasses
 from typing import ClassVar
 
 import numpy as np
 import pytest
 
 import hdjax
-from hdjax import effects
+from hdjax import effects, export
 from hdjax.cli import main
 from hdjax.compliance import ComplianceModel
 from hdjax.config import save_model
@@ -120,6 +121,18 @@ def test_a_term_without_c_code_is_refused_in_one_line_and_nothing_is_written(tmp
     _nothing_written(out)
 
 
+COUNTS_CASES = {
+    "counts_per_rev_zero": ["--counts-per-rev-m", "0", "--counts-per-rev-l", "4096"],
+    "counts_per_rev_negative": ["--counts-per-rev-m", "4096", "--counts-per-rev-l", "-4096"],
+    "counts_per_rev_fraction": ["--counts-per-rev-m", "2.5", "--counts-per-rev-l", "4096"],
+    "counts_per_rev_word": ["--counts-per-rev-m", "4096", "--counts-per-rev-l", "many"],
+    "counts_per_rev_empty": ["--counts-per-rev-m", "", "--counts-per-rev-l", "4096"],
+    "counts_per_rev_too_large": ["--counts-per-rev-m", str(2**53 + 1), "--counts-per-rev-l", "1"],
+    # the model's joint gives no encoder_bits_load: one option alone is refused
+    "counts_per_rev_one_encoder": ["--counts-per-rev-m", "4096"],
+}
+
+
 @pytest.mark.parametrize(
     "case, expect",
     [
@@ -129,6 +142,13 @@ def test_a_term_without_c_code_is_refused_in_one_line_and_nothing_is_written(tmp
         ("no_model", "no such model file"),
         ("not_a_model", "not an hdjax model file"),
         ("columns_without_data", "give --data too"),
+        ("counts_per_rev_zero", "--counts-per-rev-m must be a whole number of encoder counts"),
+        ("counts_per_rev_negative", "--counts-per-rev-l must be a whole number"),
+        ("counts_per_rev_fraction", "per revolution, 1 to 2^53 (e.g. 2097152 for a 21-bit"),
+        ("counts_per_rev_word", "got 'many'"),
+        ("counts_per_rev_empty", "--counts-per-rev-m must be a whole number"),
+        ("counts_per_rev_too_large", "got '9007199254740993'"),
+        ("counts_per_rev_one_encoder", "the load encoder's resolution is unknown"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(case, expect, models, tmp_path, capsys):
@@ -149,6 +169,8 @@ def test_bad_input_is_one_line_and_exit_2(case, expect, models, tmp_path, capsys
         model.write_text('{"a": 1}')
     elif case == "columns_without_data":
         extra = ["--columns", str(tmp_path / "map.toml")]
+    elif case.startswith("counts_per_rev"):
+        extra = COUNTS_CASES[case]
     assert main(["export", "--model", str(model), "--out", str(out), *extra]) == 2
     assert expect in _one_error_line(capsys)
     if case == "foreign_folder":
@@ -163,3 +185,40 @@ def test_overwrite_replaces_only_an_export(models, tmp_path):
     assert main(argv + ["--vectors", "10"]) == 0
     assert main(argv + ["--vectors", "20", "--overwrite"]) == 0
     assert len((out / "test_vectors.csv").read_text().splitlines()) == 21
+
+
+def test_the_counts_calling_sequence_of_the_readme_compiles(tmp_path):
+    if export.find_compiler() is None:
+        pytest.skip("no C compiler (cc, gcc or clang) on PATH")
+    # a joint with encoder resolutions: the estimator takes counts, 2^bits per revolution
+    joint = dataclasses.replace(JOINT, encoder_bits_motor=23, encoder_bits_load=19)
+    save_model(tmp_path / "m.json", joint, compliance=MODELS["every_effect"]())
+    out = tmp_path / "c"
+    argv = ["export", "--model", str(tmp_path / "m.json"), "--out", str(out), "-q"]
+    assert main(argv + ["--vectors", "10"]) == 0
+    header = (out / "hdjax_estimator.h").read_text()
+    assert "#define HDJAX_COUNTS_PER_REV_M 8388608LL" in header
+    assert "#define HDJAX_COUNTS_PER_REV_L 524288LL" in header
+    readme = (out / "README.md").read_text()
+    block = readme.split("From encoder counts")[1].split("```c\n")[1].split("```")[0]
+    assert "hdjax_sample_from_counts(&x, t, counts_m, counts_l, current, &zero);" in block
+    (out / "use.c").write_text(
+        '#include "hdjax_estimator.h"\n'
+        "double use(double t, long long counts_m, long long counts_l, double current,\n"
+        "           double temperature, int first_sample);\n"
+        "static hdjax_state est;\n"
+        "double use(double t, long long counts_m, long long counts_l, double current,\n"
+        "           double temperature, int first_sample)\n{\n" + block + "    return torque;\n}\n"
+    )
+    export.compile_c(
+        out, ["hdjax_estimator.c", "use.c"], "libuse.so", extra=("-pedantic", "-shared", "-fPIC")
+    )
+    # --counts-per-rev-m/-l override the joint
+    out = tmp_path / "c2"
+    argv = ["export", "--model", str(tmp_path / "m.json"), "--out", str(out), "-q"]
+    assert (
+        main(argv + ["--vectors", "10", "--counts-per-rev-m", "1000", "--counts-per-rev-l", "7"])
+        == 0
+    )
+    header = (out / "hdjax_estimator.h").read_text()
+    assert "HDJAX_COUNTS_PER_REV_M 1000LL" in header and "HDJAX_COUNTS_PER_REV_L 7LL" in header

@@ -26,10 +26,15 @@ EXAMPLE = """\
 example:
   hdjax export --model runs/song2019/model.json --out runs/song2019_c
   hdjax export --model runs/song2019 --method network --precision single --out runs/net_c
+  hdjax export --model runs/song2019 --counts-per-rev-m 2097152 --counts-per-rev-l 524288 \\
+      --out runs/song2019_c
 
 OUT holds hdjax_estimator.h and hdjax_estimator.c (call hdjax_init, then hdjax_step once per
-sample), README.md with the calling sequence, test_vectors.csv (inputs and the torque hdjax
-computes for them) and hdjax_check.c, which checks a build against the vectors:
+sample; hdjax_sample_from_counts fills a sample from 64-bit encoder counts as hdjax reads them,
+when both encoders' counts per revolution are known: the joint's encoder_bits_motor and
+encoder_bits_load, or --counts-per-rev-m/-l), README.md with the calling sequence,
+test_vectors.csv (inputs and the torque hdjax computes for them) and hdjax_check.c,
+which checks a build against the vectors:
   cc -std=c99 -O2 hdjax_estimator.c hdjax_check.c -lm -o hdjax_check
   ./hdjax_check test_vectors.csv
 The step uses the present sample and earlier ones only; it equals 'hdjax estimate --causal'.
@@ -66,6 +71,14 @@ def add_parser(sub) -> None:
     p.add_argument(
         "--vectors", type=int, default=2000, help="samples in test_vectors.csv (default 2000)"
     )
+    for suffix, name, field in (("m", "motor", "motor"), ("l", "load", "load")):
+        p.add_argument(
+            f"--counts-per-rev-{suffix}",
+            metavar="N",
+            help=f"{name} encoder counts per revolution (a positive whole number; default "
+            f"2^encoder_bits_{field} of the model's joint): with both encoders' resolutions "
+            "known the estimator gets hdjax_sample_from_counts",
+        )
     add_flag(p, "--overwrite", RESULT_OVERWRITE)
     add_quiet(p)
 
@@ -75,7 +88,7 @@ def command(args, parser) -> int:
     from .._errors import ConfigError
     from .._formats import load_recording
     from ..config import check_compatible, load_model
-    from ..export import export_files
+    from ..export import check_counts_per_rev, export_files
     from ..report import ResultDir
 
     progress = Progress(args.quiet)
@@ -83,6 +96,10 @@ def command(args, parser) -> int:
         raise ConfigError("--columns maps the --data file's columns; give --data too")
     if args.vectors < 2:
         raise ConfigError(f"--vectors must be at least 2 samples, got {args.vectors}")
+    cpr = {
+        suffix: None if value is None else check_counts_per_rev(value, f"--counts-per-rev-{suffix}")
+        for suffix, value in (("m", args.counts_per_rev_m), ("l", args.counts_per_rev_l))
+    }
     out = Path(args.out)
     inputs = [Path(args.model), args.data, args.columns]
     with ResultDir(out, overwrite=args.overwrite, inputs=inputs, command="export") as rd:
@@ -102,6 +119,8 @@ def command(args, parser) -> int:
             recording=recording,
             n_vectors=args.vectors,
             source=str(path),
+            counts_per_rev_m=cpr["m"],
+            counts_per_rev_l=cpr["l"],
         )
         for name, data in files.items():
             rd.write_bytes(name, data)

@@ -29,8 +29,10 @@ class CCode:
     """The generated estimator: `header` (`hdjax_estimator.h`) and `source`
     (`hdjax_estimator.c`) texts, the `extras` the sample carries (in the order of its `extra`
     array), the `precision`, what it estimates (`kind`: `"compliance"` or `"network"`), the
-    `flags` its step can set (macro names) and `notes` (what differs from the JAX estimate
-    without `causal`, for the README)."""
+    `flags` its step can set (macro names), `notes` (what differs from the JAX estimate
+    without `causal`, for the README) and `counts_per_rev`, the motor and load encoders' counts
+    per revolution when it has `hdjax_sample_from_counts` ([`hdjax.export.counts_c`][]), else
+    `None`."""
 
     header: str
     source: str
@@ -39,6 +41,18 @@ class CCode:
     kind: str
     flags: tuple[str, ...]
     notes: tuple[str, ...]
+    counts_per_rev: tuple[int, int] | None = None
+
+
+HEADER_TAIL = """
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* HDJAX_ESTIMATOR_H */
+"""
+"""How every estimator header ends: declarations added later ([`hdjax.export.counts_c`][]) go
+before it."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -265,13 +279,7 @@ double hdjax_step(hdjax_state *s, const hdjax_sample *x);
    flags[i]. */
 void hdjax_batch(hdjax_state *s, const hdjax_sample *x, size_t n, double *torque,
                  unsigned *flags);
-
-#ifdef __cplusplus
-}}
-#endif
-
-#endif /* HDJAX_ESTIMATOR_H */
-"""
+{HEADER_TAIL}"""
     init = [line for _, line in states if line]
     step_helpers = [helpers] + ([_window_slope(window)] if velocity == "smoothed" else [])
     source = f"""\

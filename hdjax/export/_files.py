@@ -8,11 +8,12 @@ bytes by name; `hdjax export` writes them into a result folder.
 from __future__ import annotations
 
 from .. import __version__
-from .._errors import ExportError, ModelMismatchError
+from .._errors import ConfigError, ExportError, ModelMismatchError
 from .._recording import Recording
 from ..config import SavedModel
 from ._assemble import FLAGS, CCode
 from ._compliance import compliance_c
+from ._counts import ENCODERS, counts_c, counts_per_rev
 from ._network import network_c
 from ._vectors import expected, synthetic_recording, vectors_csv
 
@@ -108,14 +109,24 @@ int main(int argc, char **argv)
 """
 
 
-def readme(code: CCode, *, source: str, method: str, n_vectors: int, model_lines: list[str]) -> str:
+def readme(
+    code: CCode,
+    *,
+    source: str,
+    method: str,
+    n_vectors: int,
+    model_lines: list[str],
+    unknown: tuple[str, ...] = (),
+) -> str:
     """The README of an export: files, build and check, the calling sequence, inputs, flags and
-    what the step computes."""
+    what the step computes; `unknown` names the encoders whose resolution is unknown when the
+    estimator takes no counts."""
     extras = "".join(
         f"| `extra[{i}]` | as logged | the extra column `{name}` |\n"
         for i, name in enumerate(code.extras)
     )
     init_extra = ", {" + ", ".join(code.extras) + "}" if code.extras else ""
+    counts_call, counts_text = _counts_readme(code, unknown)
     flags = "".join(
         f"| `{name}` | {value} | {meaning} |\n"
         for name, value, meaning in FLAGS
@@ -169,7 +180,7 @@ if (est.flags & HDJAX_OUT_OF_RANGE) {{
 /* or a block of samples at once: */
 hdjax_batch(&est, samples, n, torques, flags);   /* flags may be NULL */
 ```
-
+{counts_call}
 `hdjax_step` keeps everything it remembers (previous samples for the velocities, filter and
 hysteresis states) in `hdjax_state`; one state per joint. Each call costs a fixed number of
 operations: no loop depends on the data.
@@ -183,8 +194,7 @@ operations: no loop depends on the data.
 | `theta_l` | rad | load (flexspline output) angle, unwrapped, double |
 | `current` | A | motor current |
 {extras}
-Encoder counts become radians as `counts * (2 * M_PI / counts_per_rev)` in double, less the
-offset the calibration used. Angles and the twist are computed in double in either precision.
+{counts_text} Angles and the twist are computed in double in either precision.
 
 ## Flags (`est.flags` after each step)
 
@@ -197,6 +207,62 @@ offset the calibration used. Angles and the twist are computed in double in eith
 
 {model}
 """
+
+
+def _counts_readme(code: CCode, unknown: tuple[str, ...]) -> tuple[str, str]:
+    """The README's calling sequence from encoder counts and its paragraph on counts."""
+    if code.counts_per_rev is None:
+        options = " ".join(
+            f"--counts-per-rev-{suffix} N" for suffix, name, _ in ENCODERS if name in unknown
+        )
+        fields = " / ".join(field for _, name, field in ENCODERS if name in unknown)
+        whose = (
+            f"the {unknown[0]} encoder's resolution is"
+            if len(unknown) == 1
+            else "the motor and load encoders' resolutions are"
+        )
+        text = (
+            f"Encoder counts: this export has no `hdjax_sample_from_counts`, as {whose} "
+            f"unknown (the joint gives no `{fields}`); export again with `{options}` for it "
+            "(or set them in the `[joint]` table). Meanwhile convert as hdjax "
+            "reads a count column `{ counts_per_rev = N, offset = ... }`: "
+            '`theta = ((double)counts - (double)first) * (2 pi / N)` for `offset = "first"`, '
+            "`theta = (double)counts * (2 pi / N) + offset` for a number, the factor `2 pi / N` "
+            "rounded to double once."
+        )
+        return "", text
+    cm, cl = code.counts_per_rev
+    call = f"""
+From encoder counts (motor {cm}, load {cl} counts per revolution: `HDJAX_COUNTS_PER_REV_M`,
+`HDJAX_COUNTS_PER_REV_L`), converted exactly as hdjax reads a log's count columns:
+
+```c
+/* the offsets of the calibration log's column map, e.g.
+     theta_m = {{ source = "enc_m", counts_per_rev = {cm}, offset = "first" }}
+     theta_l = {{ source = "enc_l", counts_per_rev = {cl}, offset = 0.0123 }}
+   offset = "first": zero_x is the stream's first count; offset = a number: offset_x [rad] */
+static hdjax_counts_offset zero = {{0, 0, 0.0, 0.0123}};
+
+/* every control period, in time order: */
+if (first_sample) zero.zero_m = counts_m;                /* offset = "first" */
+hdjax_sample x;
+hdjax_sample_from_counts(&x, t, counts_m, counts_l, current, &zero);  /* long long counts */
+{"".join(f"x.extra[{i}] = {name};{chr(10)}" for i, name in enumerate(code.extras))}\
+double torque = hdjax_step(&est, &x);
+```
+"""
+    text = (
+        "`hdjax_sample_from_counts` takes the multi-turn counts as `long long` (64-bit, "
+        "unwrapped: a counter that wraps must be unwrapped first) and computes "
+        "`theta = ((double)counts - (double)zero) * HDJAX_RAD_PER_COUNT + offset` step by step "
+        "in double, as hdjax's reader does (`HDJAX_RAD_PER_COUNT_x` is `2 pi / counts_per_rev` "
+        "rounded once), so its angles equal hdjax's to the bit for counts up to 2^53; pass "
+        "`NULL` for no offset. The step then equals `hdjax estimate --causal` of a log read with "
+        "these `counts_per_rev` and the same offsets. Compile with `-std=c99` (or "
+        "`-ffp-contract=off`) "
+        "where the target has fused multiply-add."
+    )
+    return call, text
 
 
 def _model_lines(saved: SavedModel, method: str) -> list[str]:
@@ -231,6 +297,8 @@ def export_files(
     recording: Recording | None = None,
     n_vectors: int = 2000,
     source: str = "model.json",
+    counts_per_rev_m: int | None = None,
+    counts_per_rev_l: int | None = None,
 ) -> dict[str, bytes]:
     """The files of an export of a saved model, by name (see [`FILES`][]).
 
@@ -244,11 +312,17 @@ def export_files(
     - `recording`: the samples of the test vectors (its first `n_vectors`); default a
       [`hdjax.export.synthetic_recording`][] of `n_vectors` samples.
     - `source`: the model's name for the README.
+    - `counts_per_rev_m`, `counts_per_rev_l`: the motor and load encoders' counts per
+      revolution (positive whole numbers), default 2^bits of the joint's `encoder_bits_motor`,
+      `encoder_bits_load`: with both known the estimator gets `hdjax_sample_from_counts`
+      ([`hdjax.export.counts_c`][]), else the README says what is missing.
 
     **Returns:** file name -> content.
 
     **Raises:** [`hdjax.ExportError`][] (a term without C code, an estimate that reads ahead),
-    [`hdjax.ModelMismatchError`][] (no such estimator in the file).
+    [`hdjax.ModelMismatchError`][] (no such estimator in the file), [`hdjax.ConfigError`][] (a
+    counts per revolution that is not a positive whole number, or given for one encoder while
+    the other's is unknown).
     """
     if method not in METHODS:
         raise ExportError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -265,6 +339,18 @@ def export_files(
             raise ModelMismatchError(f"{source}: holds no network; use --method model")
         code = network_c(saved.network, joint, precision=precision, causal=causal)
         kw = {"network": saved.network}
+    cpr = counts_per_rev(joint, counts_per_rev_m, counts_per_rev_l)
+    unknown = tuple(name for c, (_, name, _) in zip(cpr, ENCODERS) if c is None)
+    if unknown and (counts_per_rev_m is not None or counts_per_rev_l is not None):
+        # an option asks for the counts function, which the other encoder's resolution lacks
+        given = "m" if counts_per_rev_m is not None else "l"
+        suffix, name, field = next(e for c, e in zip(cpr, ENCODERS) if c is None)
+        raise ConfigError(
+            f"--counts-per-rev-{given} is given but the {name} encoder's resolution is unknown "
+            f"({source}: the joint has no {field}); give --counts-per-rev-{suffix} too"
+        )
+    if not unknown:
+        code = counts_c(code, cpr[0][0], cpr[1][0], origin=(cpr[0][1], cpr[1][1]))
     if recording is None:
         recording = synthetic_recording(joint, n_vectors, extras=code.extras, **kw)
     elif recording.n_samples > n_vectors:
@@ -283,5 +369,6 @@ def export_files(
             method=method,
             n_vectors=recording.n_samples,
             model_lines=_model_lines(saved, method),
+            unknown=unknown,
         ).encode(),
     }
