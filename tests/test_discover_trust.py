@@ -31,7 +31,12 @@ from hdjax.discover import DiscoverOptions, discover, refit_structure
 from hdjax.discover._loop import calibrate_baseline
 from hdjax.discover._pipeline import calibrate, design, estimate
 from hdjax.discover._scores import _as_data
-from hdjax.discover._uncertainty import bootstrap_length, effect_intervals, instrument_torque
+from hdjax.discover._uncertainty import (
+    bootstrap_length,
+    effect_intervals,
+    instrument_torque,
+    instrumented_signals,
+)
 from hdjax.effects import TwistHysteresis, twist_compliance
 
 from .discover_batch import simulate_draws
@@ -152,7 +157,8 @@ def _coverage(kind, n=60):
         a = design(model, *data.pair(est))
         resid = data.twist - a @ np.asarray(model.coef)
         length = bootstrap_length(resid, data.starts)  # the loop's rule
-        z = design(model, data.pair(est)[0], instrument_torque(data.torque, data.starts))
+        sig_z = instrumented_signals(data.pair(est)[0], data.starts)  # the loop's instruments
+        z = design(model, sig_z, instrument_torque(data.torque, data.starts))
         iv = effect_intervals(model, a, data, est, length=length, instruments=z)[0]
         lo, hi = np.asarray(iv["arcsec_ci95"]) * ARCSEC if kind == "harmonic" else iv["nm_ci95"]
         hits.append(lo <= truth <= hi)

@@ -339,3 +339,24 @@ def test_the_loop_reports_capped_fold_blocks_in_its_notes():
     assert len(capped) == 1 and "no shorter than the residual's correlation length" in capped[0]
     corr = correlation_length(res.aux.train_residual_final)
     assert corr <= 100
+
+
+def test_the_speed_instrument_leaves_out_the_samples_the_backward_difference_reads():
+    # instrument_speed at k is free of the angle's noise at k and k-1 (the two samples of the
+    # backward difference at k), exact for a line, and never reads across a segment's start
+    from hdjax.discover._uncertainty import instrument_speed
+
+    rng = np.random.default_rng(4)
+    t = np.cumsum(np.r_[0.0, rng.uniform(0.8e-3, 1.2e-3, 199)])  # jittered time stamps
+    starts = np.zeros(200, bool)
+    starts[[0, 120]] = True
+    theta = 3.0 + 2.5 * t
+    speed = instrument_speed(t, theta, starts)
+    np.testing.assert_allclose(speed, 2.5, rtol=1e-9)
+    for k in (1, 30, 119, 121, 199):
+        bumped = theta.copy()
+        bumped[k] += 1e-3
+        moved = np.flatnonzero(np.abs(instrument_speed(t, bumped, starts) - speed) > 1e-9)
+        assert k not in moved and k + 1 not in moved, (k, moved)
+        assert np.all(np.isin(moved, np.arange(200)[starts.cumsum() == starts.cumsum()[k]]))
+        assert moved.size, k  # the neighbours do read it

@@ -74,7 +74,12 @@ from ._scores import _as_data, score_candidates as score_candidates, training_da
 from ._spectrum import OrderSpectrum, order_spectrum
 from ._start import calibrate_start, toml_settings
 from ._timing import Phases, null_phases
-from ._uncertainty import bootstrap_length, effect_intervals, instrument_torque
+from ._uncertainty import (
+    bootstrap_length,
+    effect_intervals,
+    instrument_torque,
+    instrumented_signals,
+)
 from ._unexplained import all_spectra, unexplained_structure
 
 ARCSEC = 180.0 * 3600.0 / np.pi
@@ -643,7 +648,8 @@ def _intervals(model, data, est_train, options) -> list:
         chunks = chunks_of(sig_d, torque, options.chunk)
         res_final = twist_residual(canonical(model), chunks)
         length = bootstrap_length(res_final, data.starts)
-        inst = chunks_of(sig_d, instrument_torque(torque, data.starts), options.chunk)
+        sig_z = instrumented_signals(sig_d, data.starts)
+        inst = chunks_of(sig_z, instrument_torque(torque, data.starts), options.chunk)
         return effect_intervals(
             model, None, data, est_train, length=length, chunks=chunks, instruments=inst
         )
@@ -656,7 +662,7 @@ def _intervals(model, data, est_train, options) -> list:
     inst[data.rows if data.rows is not None else slice(None)] = instrument_torque(
         view.torque, view.starts
     )
-    z = data.part(design(model, sig_d, inst))
+    z = data.part(design(model, instrumented_signals(sig_d, data.starts), inst))
     return effect_intervals(
         model, a_final, view, data.part(est_train), length=length, instruments=z
     )
