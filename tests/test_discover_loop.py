@@ -100,6 +100,17 @@ def test_lara8_config_runs_on_real_data(lara8_dir, tmp_path):
     if rep["final"]["rms"] > rep["baseline"]["rms"]:
         assert any(n.startswith("warning: on TEST") for n in rep["notes"])
     assert any("split" in n for n in rep["notes"])
+    # docs/lara8/report.md is this run with five steps: its first rows are these (the loop is
+    # greedy), so a change that moves them fails until the page is regenerated
+    page = (REPO / "docs" / "lara8" / "report.md").read_text().splitlines()
+    rows = [rep["baseline"] | {"effect": "starting model"}] + steps
+    for i, r in enumerate(rows):
+        name = r["effect"] if i == 0 else f"`{r['effect']}`"
+        cells = [f"{r[k]:.4g}" for k in ("rms", "max", "cv_torque_rms", "cv_twist_rms_arcsec")]
+        line = f"| {i} | {name} | " + " | ".join(cells) + " |"
+        assert line in page, (
+            f"{line} not in docs/lara8/report.md: run python docs/make_figures.py --lara8"
+        )
 
 
 def test_a_step_that_raises_the_test_error_is_said_loudly(monkeypatch):
