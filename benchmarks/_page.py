@@ -231,6 +231,50 @@ TARGETS: dict[str, list[tuple[str, str, str, str]]] = {
             "none",
         ),
     ],
+    "discover_noise.py": [
+        (
+            "false/met",
+            "clean joints with white encoder noise (0.3-2 arcsec, 1-4 kHz) given an effect "
+            "they do not have",
+            "{false/joints_with_an_effect} of {false/of}",
+            "at most 1 in 20",
+        ),
+        (
+            "coverage/met",
+            "95 % interval of a θ_m order-2 harmonic through `discover`, noisy joints",
+            "covers the truth in {coverage/covered} of {coverage/of}; every interval holds its "
+            "estimate: {coverage/every_interval_contains_its_estimate}",
+            "90-99 %, and every interval holds its estimate",
+        ),
+    ],
+    "real_log_cases.py": [
+        (
+            "summary/skew/delay_met",
+            "encoder skew 0.3-3 ms either sign (alone, with hysteresis, with a harmonic) found "
+            "as its delay within 10 %",
+            "{summary/skew/delay_ok}",
+            "every draw",
+        ),
+        (
+            "summary/skew/test_met",
+            "encoder skew: TEST error at most 1.5× the true structure refitted",
+            "{summary/skew/test_ok}; worst {summary/skew/test_over_true_max}×",
+            "every draw",
+        ),
+        (
+            "summary/hysteresis/test_met",
+            "hysteresis from rest, loaded the other way, one-way sweeps: TEST error at most "
+            "1.5× the true structure refitted",
+            "{summary/hysteresis/test_ok}; worst {summary/hysteresis/test_over_true_max}×",
+            "every draw",
+        ),
+        (
+            "summary/hysteresis/not_worse_met",
+            "hysteresis from rest: TEST error not above the starting model's",
+            "{summary/hysteresis/not_worse}",
+            "every draw",
+        ),
+    ],
     "compare_methods.py": [
         (
             f"{s}/target_met",

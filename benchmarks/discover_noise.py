@@ -119,6 +119,7 @@ def run(kind: str, joints: int, seed: int, duration: float) -> dict:
     other = sum(bool(r["others"]) for r in rows)
     return {
         "coverage": cov,
+        "covered": int(sum(r["covers"] for r in rows)),
         "of": joints,
         "every_interval_contains_its_estimate": own,
         "joints_with_another_effect": other,

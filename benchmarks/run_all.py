@@ -4,7 +4,8 @@
     python benchmarks/run_all.py --quick    # smaller problems (a few minutes)
     python benchmarks/run_all.py --only bench_plant.py
 
-Each script (`benchmarks/bench_*.py` and `benchmarks/compare_methods.py`) runs in its own
+Each script (`benchmarks/bench_*.py`, `benchmarks/compare_methods.py` and the residual loop's
+statistics `discover_noise.py` and `real_log_cases.py`) runs in its own
 process, one after the other, and prints JSON. This writes:
 
 - `benchmarks/results/<script>.json`: each script's JSON (the folder is not committed);
@@ -47,12 +48,16 @@ QUICK = {
     "bench_stream_parquet.py": ["--samples", "4000000", "--reference-samples", "500000"],
     "bench_warm_start.py": ["--samples", "20000"],
     "bench_export.py": ["--duration", "5", "--samples", "200000", "--check", "20000"],
+    "discover_noise.py": ["--joints", "4", "--coverage-joints", "6"],
+    "real_log_cases.py": ["--draws", "2"],
 }
 
 
 def scripts() -> list[str]:
     """The benchmark scripts, by name, in the order they run."""
     found = sorted(p.name for p in HERE.glob("bench_*.py")) + ["compare_methods.py"]
+    # the residual loop's statistics over many simulated joints (real-log effects, noise)
+    found += ["discover_noise.py", "real_log_cases.py"]
     return [s for s in found if (HERE / s).exists()]
 
 
