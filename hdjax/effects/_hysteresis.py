@@ -292,9 +292,10 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
     then falls below the noise floor and the effect's interval loses its coverage). One sample
     of delay is far below any hysteresis width.
 
-    **The state at the start.** It runs through the whole record (a gap in the log does not
-    reset it: the joint keeps its state while samples are missing) and restarts only at
-    `SEGMENT_START` (the record's start, or where recordings were joined), from the state
+    **The state at the start.** It runs through each stretch of the record and restarts at
+    `SEGMENT_START`: the record's start, where recordings were joined, and, in the residual
+    loop's signals ([`hdjax.discover.pipeline_signals`][]), after each gap in the log (a time
+    step over three sample periods, across which the path is not recorded), from the state
     `initial` $\\zeta$ times the direction of the first motion ([`dahl_initial`][]): 0 for a
     joint that starts unloaded, $-1$ for a one-way sweep from rest that starts with the state its
     last motion, the other way, left. The residual loop chooses $\\zeta$ from $\\{-1, 0, 1\\}$
