@@ -125,6 +125,23 @@ def test_sweep_over_data_names_the_reference_column(tmp_path):
     assert resolved["data"]["train"] == [str(tmp_path.resolve() / "log.csv")]
 
 
+def _interrupt_at_the_second_member(monkeypatch):
+    """The sweep's member loop, interrupted (Ctrl-C) when the second member starts; returns
+    the real loop and the list of the members' segment counts it was called with."""
+    from hdjax.cli import _sweep
+
+    real, calls = _sweep._member_loop, []
+
+    def interrupted(*a, **k):
+        calls.append(a[0]["model"]["n_segments"])
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(_sweep, "_member_loop", interrupted)
+    return real, calls
+
+
 def test_interrupted_sweep_resumes(tmp_path, monkeypatch, capsys):
     from hdjax.cli import _sweep
 
@@ -141,16 +158,7 @@ def test_interrupted_sweep_resumes(tmp_path, monkeypatch, capsys):
         "--out",
         str(out),
     ]
-    real = _sweep._member_loop
-    calls = []
-
-    def interrupted(*a, **k):
-        calls.append(a[0]["model"]["n_segments"])
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        return real(*a, **k)
-
-    monkeypatch.setattr(_sweep, "_member_loop", interrupted)
+    real, calls = _interrupt_at_the_second_member(monkeypatch)
     assert main(args) == 130
     assert not out.exists()
     assert len(list((tmp_path / "seg.partial" / "members").iterdir())) == 1
@@ -174,16 +182,7 @@ def test_fresh_ignores_cached_member_results(tmp_path, monkeypatch, capsys):
     cfg = tmp_path / "sw.toml"
     cfg.write_text(CONFIG)
     argv = ["sweep", str(cfg), "--setting", "model.n_segments", "--values", "1,3"]
-    real = _sweep._member_loop
-    calls = []
-
-    def interrupted(*a, **k):
-        calls.append(a[0]["model"]["n_segments"])
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        return real(*a, **k)
-
-    monkeypatch.setattr(_sweep, "_member_loop", interrupted)
+    real, calls = _interrupt_at_the_second_member(monkeypatch)
     assert main([*argv, "--out", str(tmp_path / "a"), "-q"]) == 130
     (member,) = (tmp_path / "a.partial" / "members").iterdir()
     cached = json.loads(member.read_text())
