@@ -38,7 +38,7 @@ ENCODERS = (("m", "motor", "encoder_bits_motor"), ("l", "load", "encoder_bits_lo
 """(suffix, encoder, joint field) of the two encoders."""
 
 
-def check_counts_per_rev(value: int | str, option: str) -> int:
+def check_counts_per_rev(value: int | float | str, option: str) -> int:
     """A counts-per-revolution option's value (a string on the command line, or an int) as a
     positive whole number up to 2^53, else a one-line [`hdjax.ConfigError`][]."""
     text = value.strip() if isinstance(value, str) else value
