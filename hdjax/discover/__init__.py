@@ -13,10 +13,9 @@ from ._loop import (
     DiscoveryStep as DiscoveryStep,
     calibrate_baseline as calibrate_baseline,
     discover as discover,
-    refit_structure as refit_structure,
-    residual_spectra as residual_spectra,
 )
 from ._pipeline import PipelineData as PipelineData, pipeline_signals as pipeline_signals
+from ._refit import refit_structure as refit_structure, residual_spectra as residual_spectra
 from ._report import report_dict as report_dict, write_report as write_report
 from ._select import cv_gain as cv_gain, fold_basis as fold_basis, sindy_select as sindy_select
 from ._spectrum import (

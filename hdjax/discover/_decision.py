@@ -20,7 +20,7 @@ import numpy as np
 
 from ..compliance import ComplianceModel
 from ..effects import current_viscous_slope, velocity_reading
-from ._options import DiscoverOptions
+from ._options import DiscoverOptions, _percent
 from ._pipeline import CrossValidation, PipelineData, within_one_se
 
 
@@ -209,3 +209,39 @@ def speed_reading(
             return other[0]
     notes.append(f"{key}: {sentence}")
     return best
+
+
+def ranking_rows(ranked: list[Ranked]) -> list[dict]:
+    """The report's ranking: the ten best keys and their scores."""
+    return [
+        dict(
+            key=r.candidate.key,
+            cv_gain=r.gain,
+            min_fold_gain=float(np.min(r.fold_gains)),
+            sindy=r.selected,
+            stability=r.stability,
+            origin=r.candidate.origin,
+        )
+        for r in ranked[:10]
+    ]
+
+
+def no_step_note(trials, shortlist, cv, options) -> str:
+    """Why no candidate was added."""
+    if shortlist and not trials:
+        return (
+            "stopped: the eligible candidates ("
+            + ", ".join(r.candidate.key for r in shortlist)
+            + ") could not be calibrated to an invertible model"
+        )
+    if not trials:
+        return (
+            "stopped: no candidate selected by the sparse regression removes at least "
+            f"{_percent(options.min_gain)} of the cross-validated twist error in at least "
+            f"{_percent(options.min_stability)} of {options.n_resamples} resampled fold assignments"
+        )
+    tried = ", ".join(f"{t.key} {t.cv_rms:.4g} N·m" for t in sorted(trials, key=lambda t: t.cv_rms))
+    return (
+        f"stopped: no candidate lowers the cross-validated torque error "
+        f"({cv.torque_rms:.4g} N·m) by {_percent(options.min_torque_gain)} (tried: {tried})"
+    )

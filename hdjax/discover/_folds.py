@@ -14,6 +14,9 @@ selection, deal the blocks to the folds in a random balanced order.
 
 from __future__ import annotations
 
+import dataclasses
+from typing import NamedTuple
+
 import numpy as np
 
 from .._features import find_gaps
@@ -152,3 +155,47 @@ def cv_block_length(
             )
         length = cap
     return length, note
+
+
+class FoldPlan(NamedTuple):
+    """The cross-validation plan over TRAIN: its blocks and folds, as TRAIN's rows ("local")
+    and as the record's rows (for the torque CV), and the resampled deals."""
+
+    block: int
+    blocks: np.ndarray
+    folds: list
+    folds_rec: list
+    blocks_rec: np.ndarray
+    resamples: list
+
+
+def fold_plan(data, test_data, resid0, options, notes):
+    """Whole contiguous blocks of TRAIN, no shorter than the residual's correlation length
+    (as long as TEST's runs when TEST is blocks of the same log), dealt to the folds; returns
+    `(plan, options)` with `n_folds` lowered when TRAIN holds fewer blocks."""
+    minimum, per_fold = options.block, 2
+    if test_data.rows is not None:
+        # TEST is blocks of the same log: hold out blocks like TEST's, one per fold at least,
+        # so the folds ask TRAIN for what TEST will (as far from the training rows)
+        minimum, per_fold = max(1, run_length(test_data.rows)), 1
+    block, note = cv_block_length(resid0, data.part_starts, options.n_folds, minimum, per_fold)
+    if note:
+        notes.append(note)
+    blocks = contiguous_blocks(data.part_starts, block)
+    n_folds = min(options.n_folds, int(blocks.max()) + 1)
+    if n_folds != options.n_folds:
+        notes.append(
+            f"TRAIN holds {n_folds} blocks as long as TEST's: cross-validation uses {n_folds} folds"
+        )
+        options = dataclasses.replace(options, n_folds=n_folds)
+    folds = fold_assignment(blocks, options.n_folds)
+    folds_rec = folds if data.rows is None else [data.rows[f] for f in folds]
+    blocks_rec = blocks
+    if data.rows is not None:
+        blocks_rec = np.full(data.n, -1)
+        blocks_rec[data.rows] = blocks
+    # each resample deals the blocks to the folds in a random balanced order
+    resamples = resampled_assignments(
+        int(blocks.max()) + 1, options.n_folds, options.n_resamples, options.seed
+    )
+    return FoldPlan(int(block), blocks, folds, folds_rec, blocks_rec, resamples), options

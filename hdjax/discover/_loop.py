@@ -31,33 +31,30 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Sequence
-from typing import NamedTuple
+from collections.abc import Callable
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .._custom_types import Float
 from .._errors import CalibrationError, ConfigError, DataError, HdjaxError, InversionError
 from .._joint import Joint
-from .._metrics import ErrorMetrics, error_metrics
+from .._metrics import error_metrics
 from .._recording import Recording
 from .._solution import RESULTS, Solution
-from ..compliance import ComplianceModel
-from ..compliance._lstsq import CalibrationData, prepare
-from ..effects import AbstractTerm
-from ..reference import reference_checks
 from ._aliases import find_aliases
 from ._chunked_fits import twist_residual
-from ._decision import Ranked, Trial, choose, eligible, qualifies, rank, speed_reading
-from ._folds import (
-    contiguous_blocks,
-    correlation_length,
-    cv_block_length,
-    fold_assignment,
-    resampled_assignments,
-    run_length,
+from ._closing import closing_notes, effect_amplitudes, left_unexplained, reference_findings
+from ._decision import (
+    Trial,
+    choose,
+    eligible,
+    no_step_note,
+    qualifies,
+    rank,
+    ranking_rows,
+    speed_reading,
 )
+from ._folds import fold_plan
 from ._options import DiscoverOptions as DiscoverOptions, stopping_rule
 from ._pipeline import (
     PipelineData,
@@ -70,113 +67,12 @@ from ._pipeline import (
     estimate,
     has_path,
 )
+from ._record import DiscoveryRecord as DiscoveryRecord, DiscoveryStep as DiscoveryStep
 from ._scores import _as_data, score_candidates as score_candidates, training_data
-from ._spectrum import OrderSpectrum, order_spectrum
-from ._start import calibrate_start, toml_settings
+from ._start import calibrate_baseline as calibrate_baseline, start_table, toml_settings
 from ._timing import Phases, null_phases
-from ._uncertainty import (
-    bootstrap_length,
-    effect_intervals,
-    instrument_torque,
-    instrumented_signals,
-)
-from ._unexplained import all_spectra, unexplained_structure
 
 ARCSEC = 180.0 * 3600.0 / np.pi
-
-
-@dataclasses.dataclass
-class DiscoveryStep:
-    """One effect the residual loop added, with its scores and the errors after adding it."""
-
-    key: str
-    family: str
-    term: AbstractTerm
-    cv_gain: float
-    fold_gains: list[float]
-    test: ErrorMetrics
-    twist_rms_arcsec: float
-    ranking: list[dict]
-    spectra: dict[str, OrderSpectrum]
-    model: ComplianceModel
-    torque_estimate: Float[np.ndarray, " n_test"]
-    stability: float = 1.0
-    cv_torque_rms: float = float("nan")
-    cv_twist_rms_arcsec: float = float("nan")
-    amplitude: dict | None = None
-    aliases: list[dict] = dataclasses.field(default_factory=list)
-    """Candidates TRAIN cannot tell apart from this one: `{"key", "cosine"}`, the smallest
-    principal-angle cosine between the centred column spans (at least 0.99)."""
-
-
-@dataclasses.dataclass
-class DiscoveryRecord:
-    """What the residual loop did, step by step: the `aux` of the [`hdjax.Solution`][] that
-    [`hdjax.discover.discover`][] returns (its `value` is the final model)."""
-
-    baseline_model: ComplianceModel
-    baseline: ErrorMetrics
-    baseline_twist_rms_arcsec: float
-    baseline_estimate: Float[np.ndarray, " n_test"]
-    steps: list[DiscoveryStep]
-    final: ErrorMetrics
-    final_spectra: dict[str, OrderSpectrum]
-    final_ranking: list[dict]
-    notes: list[str]
-    test: Recording
-    train_residual_final: Float[np.ndarray, " n_train"]
-    baseline_cv_torque_rms: float = float("nan")
-    baseline_cv_twist_rms_arcsec: float = float("nan")
-    unexplained: list = dataclasses.field(default_factory=list)
-    cv_block_samples: int = 0
-    reference_checks: dict = dataclasses.field(default_factory=dict)
-    """Per part (`"TRAIN"`, `"TEST"`), the findings of
-    [`hdjax.reference.reference_checks`][] on the final model's estimate."""
-    cv_test_ratio: float = float("nan")
-    """The final cross-validated torque RMS over the TEST RMS: far from 1 (above 2 or below
-    1/2), cross-validation does not represent TEST."""
-    stopping_rule: str = ""
-    """The rule the loop stopped by, in words, with its settings
-    (see `DiscoverOptions`)."""
-
-    @property
-    def effects(self) -> list[str]:
-        return [s.key for s in self.steps]
-
-
-def start_table(options: DiscoverOptions) -> dict:
-    """The `[model]` settings of the loop's starting model (those `hdjax run` reads too)."""
-    return {
-        "n_segments": options.n_segments,
-        "poly_order": options.poly_order,
-        "kinematic": "paper" if options.fourier_order else "none",
-        "fourier_order": options.fourier_order,
-        "per_segment": options.per_segment,
-        "velocity": "difference",
-    }
-
-
-def calibrate_baseline(
-    train: Recording | PipelineData, joint: Joint, options: DiscoverOptions, notes: list[str]
-) -> ComplianceModel:
-    """The starting model (paper structure, settings `start_table(options)`) calibrated on
-    `train` by [`hdjax.discover.calibrate_start`][], the function `hdjax run` calibrates
-    through: segments the data does not determine merged, documented fallbacks, said in
-    `notes`. `train` is a recording, or its pipeline signals (a part of a log with `rows`).
-    """
-    data = _as_data(None, train, joint)
-    current = data.part(data.sig.current)
-    scale = options.current_scale or float(np.max(np.abs(current))) or 1.0
-    res = calibrate_start(
-        start_table(options),
-        joint,
-        data.pair(),
-        notes,
-        scale=scale,
-        chunk=options.chunk,
-        rows=data.rows,
-    )
-    return res.value
 
 
 def _test_errors(model, test, rated):
@@ -260,65 +156,6 @@ def _parts(train, test, joint, options, context, notes):
     return tr, te
 
 
-class _Folds(NamedTuple):
-    """The cross-validation plan over TRAIN: its blocks and folds, as TRAIN's rows ("local")
-    and as the record's rows (for the torque CV), and the resampled deals."""
-
-    block: int
-    blocks: np.ndarray
-    folds: list
-    folds_rec: list
-    blocks_rec: np.ndarray
-    resamples: list
-
-
-def _fold_plan(data, test_data, resid0, options, notes):
-    """Whole contiguous blocks of TRAIN, no shorter than the residual's correlation length
-    (as long as TEST's runs when TEST is blocks of the same log), dealt to the folds; returns
-    `(plan, options)` with `n_folds` lowered when TRAIN holds fewer blocks."""
-    minimum, per_fold = options.block, 2
-    if test_data.rows is not None:
-        # TEST is blocks of the same log: hold out blocks like TEST's, one per fold at least,
-        # so the folds ask TRAIN for what TEST will (as far from the training rows)
-        minimum, per_fold = max(1, run_length(test_data.rows)), 1
-    block, note = cv_block_length(resid0, data.part_starts, options.n_folds, minimum, per_fold)
-    if note:
-        notes.append(note)
-    blocks = contiguous_blocks(data.part_starts, block)
-    n_folds = min(options.n_folds, int(blocks.max()) + 1)
-    if n_folds != options.n_folds:
-        notes.append(
-            f"TRAIN holds {n_folds} blocks as long as TEST's: cross-validation uses {n_folds} folds"
-        )
-        options = dataclasses.replace(options, n_folds=n_folds)
-    folds = fold_assignment(blocks, options.n_folds)
-    folds_rec = folds if data.rows is None else [data.rows[f] for f in folds]
-    blocks_rec = blocks
-    if data.rows is not None:
-        blocks_rec = np.full(data.n, -1)
-        blocks_rec[data.rows] = blocks
-    # each resample deals the blocks to the folds in a random balanced order
-    resamples = resampled_assignments(
-        int(blocks.max()) + 1, options.n_folds, options.n_resamples, options.seed
-    )
-    return _Folds(int(block), blocks, folds, folds_rec, blocks_rec, resamples), options
-
-
-def _ranking_rows(ranked: list[Ranked]) -> list[dict]:
-    """The report's ranking: the ten best keys and their scores."""
-    return [
-        dict(
-            key=r.candidate.key,
-            cv_gain=r.gain,
-            min_fold_gain=float(np.min(r.fold_gains)),
-            sindy=r.selected,
-            stability=r.stability,
-            origin=r.candidate.origin,
-        )
-        for r in ranked[:10]
-    ]
-
-
 def _trial(
     model, cand, gain, folds_, stab, data, est_train, plan, cv, options, notes, phase
 ) -> Trial:
@@ -353,27 +190,6 @@ def _shortlist_trials(shortlist, ranking, try_one, notes, options) -> list[Trial
             trials.append(trial)
             break
     return trials
-
-
-def _no_step_note(trials, shortlist, cv, options) -> str:
-    """Why no candidate was added."""
-    if shortlist and not trials:
-        return (
-            "stopped: the eligible candidates ("
-            + ", ".join(r.candidate.key for r in shortlist)
-            + ") could not be calibrated to an invertible model"
-        )
-    if not trials:
-        return (
-            "stopped: no candidate selected by the sparse regression removes at least "
-            f"{options.min_gain:.0%} of the cross-validated twist error in at least "
-            f"{options.min_stability:.0%} of {options.n_resamples} resampled fold assignments"
-        )
-    tried = ", ".join(f"{t.key} {t.cv_rms:.4g} N·m" for t in sorted(trials, key=lambda t: t.cv_rms))
-    return (
-        f"stopped: no candidate lowers the cross-validated torque error "
-        f"({cv.torque_rms:.4g} N·m) by {options.min_torque_gain:.0%} (tried: {tried})"
-    )
 
 
 def _start(train, test, joint, options, phase, notes, say):
@@ -427,7 +243,7 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
         train, test, joint, options, phase, notes, say
     )
     baseline_model = model
-    plan, options = _fold_plan(data, test_data, resid0, options, notes)
+    plan, options = fold_plan(data, test_data, resid0, options, notes)
     with phase("torque CV"):
         cv = cross_validate(model, data, plan.folds_rec, chunk=options.chunk)
     base_cv = cv
@@ -455,14 +271,15 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
         unidentified,
     )
     with phase("intervals"):
-        for s_, iv in zip(steps, _intervals(model, data, est_train, options) if steps else []):
+        amplitudes = effect_amplitudes(model, data, est_train, options) if steps else []
+        for s_, iv in zip(steps, amplitudes):
             s_.amplitude = iv
     with phase("unexplained"):
-        left = _unexplained(resid, spectra, data, options)
+        left = left_unexplained(resid, spectra, data, options)
     notes += list(dict.fromkeys(unidentified))
     final = steps[-1].test if steps else base_metrics
     with phase("reference"):
-        checks = _reference_findings(
+        checks = reference_findings(
             model, data, est_train, test_data, steps[-1].torque_estimate if steps else base_est
         )
         for part, found in checks.items():
@@ -471,7 +288,7 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
                     say(f"reference ({part}): {f['message']}")
     say(phase.line())
     ratio = cv.torque_rms / final.rms if final.rms > 0 else float("nan")
-    notes += _closing_notes(ratio, cv, base_cv, final, base_metrics)
+    notes += closing_notes(ratio, cv, base_cv, final, base_metrics)
     record = DiscoveryRecord(
         baseline_model=baseline_model,
         baseline=base_metrics,
@@ -542,7 +359,7 @@ def _add_effects(
             unidentified=unidentified,
         )
         ranked = rank(scored, options.min_gain)
-        ranking = _ranking_rows(ranked)
+        ranking = ranking_rows(ranked)
         if len(steps) >= options.max_effects:
             notes.append(f"stopped: reached max_effects = {options.max_effects}")
             break
@@ -568,7 +385,7 @@ def _add_effects(
         trials = _shortlist_trials(shortlist, ranking, try_one, notes, options)
         best = choose(trials, cv, plan.blocks_rec, options, notes)
         if best is None:
-            notes.append(_no_step_note(trials, shortlist, cv, options))
+            notes.append(no_step_note(trials, shortlist, cv, options))
             break
         best = speed_reading(best, trials, data, notes, try_key)
         step = _step(
@@ -640,141 +457,10 @@ def _say_step(steps, base_metrics, say, notes) -> None:
         say(rise)
 
 
-def _intervals(model, data, est_train, options) -> list:
-    """Every added effect's amplitude with its 95 % moving-block bootstrap interval over
-    TRAIN ([`hdjax.discover._uncertainty.effect_intervals`][])."""
-    sig_d, torque = data.pair(est_train)
-    if options.chunk:
-        chunks = chunks_of(sig_d, torque, options.chunk)
-        res_final = twist_residual(canonical(model), chunks)
-        length = bootstrap_length(res_final, data.starts)
-        sig_z = instrumented_signals(sig_d, data.starts)
-        inst = chunks_of(sig_z, instrument_torque(torque, data.starts), options.chunk)
-        return effect_intervals(
-            model, None, data, est_train, length=length, chunks=chunks, instruments=inst
-        )
-    # designs on the whole record (memory states), statistics on TRAIN's rows
-    view = data.view()
-    a_final = data.part(design(model, sig_d, torque))
-    res_final = view.twist - a_final @ np.asarray(model.coef)
-    length = bootstrap_length(res_final, view.starts)
-    inst = np.full(data.n, np.nan)
-    inst[data.rows if data.rows is not None else slice(None)] = instrument_torque(
-        view.torque, view.starts
-    )
-    z = data.part(design(model, instrumented_signals(sig_d, data.starts), inst))
-    return effect_intervals(
-        model, a_final, view, data.part(est_train), length=length, instruments=z
-    )
-
-
-def _unexplained(resid, spectra, data, options) -> list:
-    """Structure the final model leaves above the noise in the TRAIN residual
-    ([`hdjax.discover._unexplained.unexplained_structure`][])."""
-    view = data.view()
-    corr = correlation_length(resid, view.starts) if resid is not None else 1
-    angles = {s: np.asarray(view.sig.get(s)) for s in ("theta_m", "theta_l")}
-    return unexplained_structure(
-        resid if resid is not None else view.twist * 0.0,
-        spectra
-        if resid is None
-        else all_spectra(
-            resid,
-            angles,
-            {"theta_m": options.library.orders_m, "theta_l": options.library.orders_l},
-            spectra,
-        ),
-        {
-            "torque": view.torque,
-            "omega_m": np.asarray(view.sig.omega_m),
-            "omega_l": np.asarray(view.sig.omega_l),
-        },
-        correlation_length=corr,
-        starts=view.starts,
-        angles=angles,
-    )
-
-
-def _closing_notes(ratio, cv, base_cv, final, base_metrics) -> list[str]:
-    """Loud notes on the final result: cross-validation far from TEST, or TEST worse than
-    the start (TEST never chooses, so it can disagree with cross-validation)."""
-    notes = []
-    if np.isfinite(ratio) and not 0.5 <= ratio <= 2.0:
-        notes.append(
-            f"cross-validation does not represent TEST: the final cross-validated torque RMS "
-            f"({cv.torque_rms:.4g} N·m) is {ratio:.2g} times the TEST RMS ({final.rms:.4g} N·m), "
-            "so the held-out blocks of TRAIN ask for "
-            + ("more extrapolation than TEST does" if ratio > 1 else "less than TEST does")
-            + "; the loop's choices rest on TRAIN's folds, and the TEST figure is what to trust"
-        )
-    if final.rms > base_metrics.rms:
-        notes.append(
-            f"warning: on TEST the final model's torque RMS ({final.rms:.4g} N·m) is "
-            f"{final.rms / base_metrics.rms - 1:.1%} above the starting model's "
-            f"({base_metrics.rms:.4g} N·m), although cross-validation on TRAIN lowered it from "
-            f"{base_cv.torque_rms:.4g} to {cv.torque_rms:.4g} N·m: TRAIN and TEST differ"
-        )
-    return notes
-
-
-def _reference_findings(model, data, est_train, test_data, est_test) -> dict:
-    """[`hdjax.reference.reference_checks`][] of TRAIN (the final model's estimate on its rows)
-    and TEST (its estimate there, and the calibrated range)."""
-    out = {}
-    lo, hi = model.torque_range
-    for part, d, est in (("TRAIN", data, data.part(est_train)), ("TEST", test_data, est_test)):
-        v = d.view()
-        est = np.asarray(est, np.float64)
-        out[part] = reference_checks(
-            np.asarray(v.sig.t),
-            v.torque,
-            est,
-            current=np.asarray(v.sig.current),
-            omega=np.asarray(v.sig.omega_l),
-            in_range=(est >= lo) & (est <= hi),
-        )
-    return out
-
-
-def refit_structure(
-    train: Recording,
-    test: Recording,
-    joint: Joint,
-    terms: Sequence[AbstractTerm],
-    options: DiscoverOptions = DiscoverOptions(),
-) -> ErrorMetrics:
-    """TEST errors of the starting model plus `terms` (e.g. the true structure), calibrated by
-    the same pipeline as the loop's (hysteresis driven by the model's own estimate).
-
-    **Returns:** an [`hdjax.ErrorMetrics`][].
-    """
-    notes: list[str] = []
-    base = calibrate_baseline(train, joint, options, notes)
-    data = _as_data(base, train)
-    model, _ = calibrate(base.with_effects(*terms), data, notes, estimate(base, data))
-    return _test_errors(model, test, joint.rated_torque)[0]
-
-
-def residual_spectra(
-    model: ComplianceModel, data: CalibrationData, *, orders: tuple[float, float] = (0.5, 8.0)
-) -> dict[str, OrderSpectrum]:
-    """Order spectra of a model's twist residual against both angles (for reports)."""
-    sig, torque = prepare(model, data)
-    r = np.asarray(sig.twist) - np.asarray(model.predict_twist(sig, torque))
-    out = {}
-    for signal in ("theta_m", "theta_l"):
-        theta = np.asarray(sig.get(signal))
-        lo = max(orders[0], 2 * np.pi / max(np.ptp(theta), 1e-12))
-        if lo < orders[1]:
-            out[signal] = order_spectrum(theta, r, signal=signal, min_order=lo, max_order=orders[1])
-    return out
-
-
 __all__ = [
     "DiscoverOptions",
     "DiscoveryRecord",
     "DiscoveryStep",
     "discover",
-    "refit_structure",
     "HdjaxError",
 ]

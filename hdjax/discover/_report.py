@@ -17,9 +17,11 @@ from .._solution import Solution
 from ..compliance._lstsq import CalibrationData
 from ..config import save_model
 from ..report import ResultDir
-from ._loop import ARCSEC, DiscoveryRecord, residual_spectra
+from ._loop import ARCSEC
 from ._options import DiscoverOptions, stopping_rule
 from ._pipeline import PipelineData, design, pipeline_signals
+from ._record import DiscoveryRecord
+from ._refit import residual_spectra
 
 
 def report_dict(solution: Solution, *, extra: dict | None = None) -> dict:

@@ -17,7 +17,16 @@ from .._solution import Solution
 from ..compliance import ComplianceModel, merge_sparse_segments
 from ..compliance._lstsq import failure_message
 from ..config._schema import STRUCTURE_KEYS, paper_model
-from ._pipeline import calibrate, estimate, fit_merging, has_path, pipeline_signals
+from ._options import DiscoverOptions
+from ._pipeline import (
+    PipelineData,
+    calibrate,
+    estimate,
+    fit_merging,
+    has_path,
+    pipeline_signals,
+)
+from ._scores import _as_data
 
 
 def structure_table(table: Mapping) -> dict:
@@ -129,3 +138,38 @@ def calibrate_structure(structure: ComplianceModel, train: Recording, notes: lis
     fits: list[Solution] = []
     calibrate(structure, data, notes, start, fits=fits)
     return fits[-1]
+
+
+def start_table(options: DiscoverOptions) -> dict:
+    """The `[model]` settings of the loop's starting model (those `hdjax run` reads too)."""
+    return {
+        "n_segments": options.n_segments,
+        "poly_order": options.poly_order,
+        "kinematic": "paper" if options.fourier_order else "none",
+        "fourier_order": options.fourier_order,
+        "per_segment": options.per_segment,
+        "velocity": "difference",
+    }
+
+
+def calibrate_baseline(
+    train: Recording | PipelineData, joint: Joint, options: DiscoverOptions, notes: list[str]
+) -> ComplianceModel:
+    """The starting model (paper structure, settings `start_table(options)`) calibrated on
+    `train` by [`hdjax.discover.calibrate_start`][], the function `hdjax run` calibrates
+    through: segments the data does not determine merged, documented fallbacks, said in
+    `notes`. `train` is a recording, or its pipeline signals (a part of a log with `rows`).
+    """
+    data = _as_data(None, train, joint)
+    current = data.part(data.sig.current)
+    scale = options.current_scale or float(np.max(np.abs(current))) or 1.0
+    res = calibrate_start(
+        start_table(options),
+        joint,
+        data.pair(),
+        notes,
+        scale=scale,
+        chunk=options.chunk,
+        rows=data.rows,
+    )
+    return res.value

@@ -319,49 +319,57 @@ def effect_intervals(
             xp, _ = partial_out(fit_a, y, others, sl, gram)
         else:
             _, xp, _ = partial_out_chunked(model, fit, y, others, sl, gram)
-        beta = coef[sl]
-        target = xp @ beta + resid
-        peak = np.abs(x).max(axis=0)
-        amp = float(_amplitude(term, beta[None, :], peak)[0])
-        # the replicates resample the estimating equation xp'(y - X beta) = 0
-        xx = np.einsum("ni,nj->nij", xp, xp).reshape(n, m * m)
-        xy = xp * target[:, None]
-        # local compliance weighted by the effect's column energy: twist -> equivalent torque,
-        # the ratio formed in each replicate from the same blocks
-        w = np.sum(x * x, axis=1)
-        if not np.sum(w) > 0:
-            w = np.ones(n)
-        k_eff = float(np.sum(w * comp) / np.sum(w))
-        ci = []
-        boot_coef = None
-        for blocks in schemes:
-            boot = np.linalg.solve(
-                blocks.sums(xx).reshape(-1, m, m) + 1e-300 * np.eye(m), blocks.sums(xy)[..., None]
-            )
-            boot_coef = boot[..., 0] if boot_coef is None else boot_coef
-            amps = _amplitude(term, boot[..., 0], peak)
-            k_boot = blocks.sums(w * comp) / np.maximum(blocks.sums(w), np.finfo(float).tiny)
-            ci.append((amps, amps / k_boot))
-        q = [(1 - LEVEL) / 2, (1 + LEVEL) / 2]
-        lo, hi = np.quantile(ci[0][0], q)
-        nm_lo, nm_hi = np.quantile(ci[1][1], q)
-        row = dict(
-            effect=term.key,
-            arcsec=amp * ARCSEC,
-            arcsec_ci95=[float(lo) * ARCSEC, float(hi) * ARCSEC],
-            nm=amp / k_eff,
-            nm_ci95=[float(nm_lo), float(nm_hi)],
-            block_samples=length,
-            nm_block_samples=length_nm,
-        )
-        label = getattr(term, "coefficient_label", None)
-        if label is not None and m == 1:
-            # the coefficient is the physical parameter itself (a delay): its own interval
-            name, unit = label
-            row[name] = float(beta[0]) * unit
-            row[name + "_ci95"] = [float(v) * unit for v in np.quantile(boot_coef[:, 0], q)]
+        row = _bootstrapped(term, coef[sl], xp, x, resid, comp, schemes)
+        row |= dict(block_samples=length, nm_block_samples=length_nm)
         out.append(row)
     return out
+
+
+def _bootstrapped(term, beta, xp, x, resid, comp, schemes) -> dict:
+    """One effect's amplitude and its 95 % intervals (twist, equivalent torque, and its own
+    parameter where its coefficient is one) from the moving-block replicates of `schemes`:
+    `beta` its coefficients, `xp` its columns with the others partialled out, `x` its columns,
+    `resid` the structural residual, `comp` the local compliance per sample."""
+    n, m = xp.shape
+    target = xp @ beta + resid
+    peak = np.abs(x).max(axis=0)
+    amp = float(_amplitude(term, beta[None, :], peak)[0])
+    # the replicates resample the estimating equation xp'(y - X beta) = 0
+    xx = np.einsum("ni,nj->nij", xp, xp).reshape(n, m * m)
+    xy = xp * target[:, None]
+    # local compliance weighted by the effect's column energy: twist -> equivalent torque,
+    # the ratio formed in each replicate from the same blocks
+    w = np.sum(x * x, axis=1)
+    if not np.sum(w) > 0:
+        w = np.ones(n)
+    k_eff = float(np.sum(w * comp) / np.sum(w))
+    ci = []
+    boot_coef = None
+    for blocks in schemes:
+        boot = np.linalg.solve(
+            blocks.sums(xx).reshape(-1, m, m) + 1e-300 * np.eye(m), blocks.sums(xy)[..., None]
+        )
+        boot_coef = boot[..., 0] if boot_coef is None else boot_coef
+        amps = _amplitude(term, boot[..., 0], peak)
+        k_boot = blocks.sums(w * comp) / np.maximum(blocks.sums(w), np.finfo(float).tiny)
+        ci.append((amps, amps / k_boot))
+    q = [(1 - LEVEL) / 2, (1 + LEVEL) / 2]
+    lo, hi = np.quantile(ci[0][0], q)
+    nm_lo, nm_hi = np.quantile(ci[1][1], q)
+    row = dict(
+        effect=term.key,
+        arcsec=amp * ARCSEC,
+        arcsec_ci95=[float(lo) * ARCSEC, float(hi) * ARCSEC],
+        nm=amp / k_eff,
+        nm_ci95=[float(nm_lo), float(nm_hi)],
+    )
+    label = getattr(term, "coefficient_label", None)
+    if label is not None and m == 1:
+        # the coefficient is the physical parameter itself (a delay): its own interval
+        name, unit = label
+        row[name] = float(beta[0]) * unit
+        row[name + "_ci95"] = [float(v) * unit for v in np.quantile(boot_coef[:, 0], q)]
+    return row
 
 
 def _held_at_floor(model: ComplianceModel, design: np.ndarray, y, torque) -> np.ndarray:
