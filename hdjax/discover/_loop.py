@@ -32,13 +32,14 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .._errors import CalibrationError, ConfigError, DataError, HdjaxError, InversionError
 from .._joint import Joint
-from .._metrics import error_metrics
+from .._metrics import ErrorMetrics, error_metrics
 from .._recording import Recording
 from .._solution import RESULTS, Solution
 from ._aliases import find_aliases
@@ -54,7 +55,7 @@ from ._decision import (
     ranking_rows,
     speed_reading,
 )
-from ._folds import fold_plan
+from ._folds import FoldPlan, fold_plan
 from ._options import DiscoverOptions as DiscoverOptions, stopping_rule
 from ._pipeline import (
     PipelineData,
@@ -156,17 +157,33 @@ def _parts(train, test, joint, options, context, notes):
     return tr, te
 
 
-def _trial(
-    model, cand, gain, folds_, stab, data, est_train, plan, cv, options, notes, phase
-) -> Trial:
+class _Run(NamedTuple):
+    """What stays fixed while the loop adds effects: TRAIN's and TEST's signals, the fold
+    plan, the settings, the starting model's TEST errors, and where to time, say and note."""
+
+    data: PipelineData
+    test_data: PipelineData
+    plan: FoldPlan
+    options: DiscoverOptions
+    extra_columns: tuple[str, ...]
+    joint: Joint
+    base_metrics: ErrorMetrics
+    phase: Phases
+    say: Callable[[str], None]
+    notes: list[str]
+    unidentified: list[str]
+
+
+def _trial(run: _Run, model, cand, gain, folds_, stab, est_train, cv, phase) -> Trial:
     """Calibrate `cand` into `model` and cross-validate the whole pipeline per fold; raises
     `CalibrationError` or `InversionError` when it cannot."""
+    data, chunk = run.data, run.options.chunk
     with phase("calibrate"):
         new_model, new_est = calibrate(
-            model.with_effects(cand.term), data, notes, est_train, options.chunk
+            model.with_effects(cand.term), data, run.notes, est_train, chunk
         )
     with phase("torque CV"):
-        new_cv = cross_validate(new_model, data, plan.folds_rec, cv, options.chunk)
+        new_cv = cross_validate(new_model, data, run.plan.folds_rec, cv, chunk)
     return Trial(cand, gain, folds_, stab, new_model, new_est, new_cv)
 
 
@@ -254,22 +271,11 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
             "the range its training part calibrates, so no effect can be judged and none is added"
         )
     unidentified: list[str] = []
-    steps, model, est_train, cv, spectra, resid, ranking = _add_effects(
-        model,
-        data,
-        test_data,
-        est_train,
-        cv,
-        plan,
-        options,
-        extra_columns,
-        joint,
-        base_metrics,
-        phase,
-        say,
-        notes,
+    run = _Run(
+        data, test_data, plan, options, extra_columns, joint, base_metrics, phase, say, notes,
         unidentified,
-    )
+    )  # fmt: skip
+    steps, model, est_train, cv, spectra, resid, ranking = _add_effects(run, model, est_train, cv)
     with phase("intervals"):
         amplitudes = effect_amplitudes(model, data, est_train, options) if steps else []
         for s_, iv in zip(steps, amplitudes):
@@ -321,22 +327,7 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
     return Solution(model, RESULTS.successful, stats, aux=record)
 
 
-def _add_effects(
-    model,
-    data,
-    test_data,
-    est_train,
-    cv,
-    plan,
-    options,
-    extra_columns,
-    joint,
-    base_metrics,
-    phase,
-    say,
-    notes,
-    unidentified,
-):
+def _add_effects(run: _Run, model, est_train, cv):
     """The loop proper: score the library, shortlist, try, choose and add one effect per
     step until the stopping rule ([`hdjax.discover._decision.choose`][]) or `max_effects`
     stops it.
@@ -344,19 +335,20 @@ def _add_effects(
     **Returns:** `(steps, model, TRAIN estimate, cross-validation, spectra, residual,
     ranking)` after the last step.
     """
+    data, plan, options, notes = run.data, run.plan, run.options, run.notes
     steps: list[DiscoveryStep] = []
     while True:
         scored, spectra, resid = score_candidates(
             model,
             data,
             options,
-            extra_columns,
+            run.extra_columns,
             folds=plan.folds,
             blocks=plan.blocks,
             resamples=plan.resamples,
             est=est_train,
-            phases=phase,
-            unidentified=unidentified,
+            phases=run.phase,
+            unidentified=run.unidentified,
         )
         ranked = rank(scored, options.min_gain)
         ranking = ranking_rows(ranked)
@@ -364,10 +356,8 @@ def _add_effects(
             notes.append(f"stopped: reached max_effects = {options.max_effects}")
             break
 
-        def try_one(cand, gain, folds_, stab, phase=phase, model=model, est=est_train, cv=cv):
-            return _trial(
-                model, cand, gain, folds_, stab, data, est, plan, cv, options, notes, phase
-            )
+        def try_one(cand, gain, folds_, stab, phase=run.phase, model=model, est=est_train, cv=cv):
+            return _trial(run, model, cand, gain, folds_, stab, est, cv, phase)
 
         def try_key(key, ranked=ranked, try_one=try_one, cv=cv):
             # the reading's own candidate, when the shortlist did not try it: its best member,
@@ -388,21 +378,17 @@ def _add_effects(
             notes.append(no_step_note(trials, shortlist, cv, options))
             break
         best = speed_reading(best, trials, data, notes, try_key)
-        step = _step(
-            best, model, data, est_train, test_data, ranked, ranking, spectra, joint, options, phase
-        )
+        step = _step(run, best, model, est_train, ranked, ranking, spectra)
         model, est_train, cv = best.model, best.estimate, best.cv
         steps.append(step)
-        _say_step(steps, base_metrics, say, notes)
+        _say_step(steps, run.base_metrics, run.say, notes)
     return steps, model, est_train, cv, spectra, resid, ranking
 
 
-def _step(
-    best, model, data, est_train, test_data, ranked, ranking, spectra, joint, options, phase
-) -> DiscoveryStep:
+def _step(run: _Run, best, model, est_train, ranked, ranking, spectra) -> DiscoveryStep:
     """The step that adds `best` to `model`: its aliases (on the signals the candidates were
     scored on, the model before this step) and its TEST errors."""
-    cand = best.candidate
+    cand, data, phase = best.candidate, run.data, run.phase
     with phase("aliases"):
         others = [
             (r.candidate.key, r.candidate.term) for r in ranked[:10] if r.candidate.key != cand.key
@@ -411,8 +397,8 @@ def _step(
             cand.term, others, *training_data(model, data, est_train), take=data.part
         )
     with phase("test"):
-        metrics, est = _test_errors(best.model, test_data, joint.rated_torque)
-        twist_rms = _twist_rms(best.model, test_data, chunk=options.chunk)
+        metrics, est = _test_errors(best.model, run.test_data, run.joint.rated_torque)
+        twist_rms = _twist_rms(best.model, run.test_data, chunk=run.options.chunk)
     return DiscoveryStep(
         key=cand.key,
         family=cand.family,
