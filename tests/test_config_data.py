@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from hdjax import DataError, Joint, save_csv
+from hdjax import ConfigError, DataError, Joint, save_csv
 from hdjax.cli import main
 from hdjax.config import build_dataset, load_experiment, synthetic_recording
 
@@ -136,3 +136,30 @@ def test_split_in_blocks_spans_the_run(tmp_path, rec):
     # blocks 0..5 of 100 samples; every 4th (block 3) is held out
     np.testing.assert_array_equal(np.asarray(ds.test["a"].t), t[300:400])
     np.testing.assert_array_equal(np.asarray(ds.train[0].t), np.r_[t[:300], t[400:]])
+
+
+def test_real_log_kind_simulates_two_motions_read_as_a_robot_log():
+    # [data] kind = "real_log" (experiments/real_log.toml, shortened): calibration and test are
+    # two motions of one joint (its encoders' offsets shared), read with jittered time stamps,
+    # dropped samples and the experiment's skew
+    from tests.conftest import REPO
+
+    short = {
+        "data.sweeps": [[-0.3, 0.3]],
+        "data.test_sweeps": [[-0.2, 0.25]],
+        "data.drop": 0.05,
+    }
+    ds = build_dataset(load_experiment(REPO / "experiments" / "real_log.toml", short))
+    (train,), test = ds.train, ds.test["sweep"]
+    assert train.torque is not None and test.torque is not None
+    for rec in (train, test):
+        dt = np.diff(np.asarray(rec.t))
+        assert np.ptp(dt[dt < 1.5e-3]) > 0.2e-3  # jitter of 0.2 periods either way
+        assert np.any(dt > 1.5e-3)  # dropped samples
+    # another motion: the load angle spans the two sweeps' ranges (plus the run-in)
+    span = lambda r: float(np.ptp(np.asarray(r.theta_l)))  # noqa: E731
+    assert abs(span(train) - span(test)) > 0.05, (span(train), span(test))
+    assert any("skew 1.5 ms" in p for p in ds.provenance), ds.provenance
+    for bad in ([[1.0, 1.0]], [[1.0]], [], "x"):
+        with pytest.raises(ConfigError, match="sweeps must be a non-empty list"):
+            load_experiment(REPO / "experiments" / "real_log.toml", {"data.sweeps": bad})

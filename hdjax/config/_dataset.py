@@ -90,6 +90,8 @@ def build_dataset(
         ds = _from_files(exp, joint, say)
     elif data["kind"] == "synthetic":
         ds = _synthetic(exp, joint, say)
+    elif data["kind"] == "real_log":
+        ds = _from_real_log(exp, joint, say)
     else:
         ds = _from_plant(exp, joint, say)
     if data["settle"] > 0:
@@ -228,6 +230,61 @@ def _from_plant(exp, joint: Joint, say) -> Dataset:
     if rec0.torque is None:
         raise ConfigError("the plant scenarios returned no reference torque")
     return Dataset(train=train, test=test, joint=joint, provenance=prov)
+
+
+def _plant_params(data: dict):
+    """The `[data]` plant: its preset with `effects` switched on or off."""
+    preset = {"song": "song_params", "hashimoto": "hashimoto_params"}[data["preset"]]
+    params = getattr(plant, preset)()
+    return params if not data["effects"] else plant.with_effects(params, dict(data["effects"]))
+
+
+def _from_real_log(exp, joint: Joint, say) -> Dataset:
+    """`kind = "real_log"`: the plant on one-way sweeps from rest under gravity with pauses,
+    read through a real log's sensors ([`hdjax.plant.simulate_real_log`][]): jittered time
+    stamps with dropped samples, encoder skew, white load-encoder noise, quantised multi-turn
+    encoders with the joint's offsets, a held reference. Calibration runs `sweeps` at
+    `speed`, the test `test_sweeps` at `test_speed` (another motion, not the same one with new
+    noise); the encoders' offsets are the joint's, the same in both."""
+    import jax
+
+    data = exp["data"]
+    seed = exp["experiment"]["seed"]
+    sensors = plant.RealLogSensors(
+        period=data["sample_period"],
+        jitter=data["jitter"],
+        drop=data["drop"],
+        skew=data["skew_ms"] * 1e-3,
+        noise_arcsec=data["noise_arcsec"],
+        bits=data["encoder_bits"],
+        hold=data["hold"],
+        twist_sign=joint.twist_sign,
+        offset_seed=seed,
+    )
+    params = _plant_params(data)
+    parts, prov = {}, []
+    for role, s, sweeps, speed in (
+        ("calibration", seed + data["train_seed_offset"], data["sweeps"], data["speed"]),
+        ("test", seed, data["test_sweeps"], data["test_speed"]),
+    ):
+        say(f"simulating one-way sweeps {sweeps} rad at {speed:g} rad/s, seed {s}, {role}")
+        rec = plant.simulate_real_log(
+            params,
+            sensors,
+            key=jax.random.PRNGKey(s),
+            sweeps=tuple(tuple(p) for p in sweeps),
+            speed=speed,
+        )
+        parts[role] = rec
+        prov.append(
+            f"plant {data['preset']} on one-way sweeps {sweeps} rad at {speed:g} rad/s, seed "
+            f"{s}, read as a real log ({data['sample_period'] * 1e3:g} ms with jitter and drops, "
+            f"skew {data['skew_ms']:g} ms, {data['noise_arcsec']:g} arcsec load-encoder noise, "
+            f"{data['encoder_bits']}-bit encoders): {rec.n_samples} {role} samples"
+        )
+    return Dataset(
+        train=[parts["calibration"]], test={"sweep": parts["test"]}, joint=joint, provenance=prov
+    )
 
 
 def plant_simulator(data: dict):

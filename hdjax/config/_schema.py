@@ -111,6 +111,27 @@ def _test_files(key, v):
     raise ConfigError(f"{key} must be a list of files or a table name -> file, got {v!r}")
 
 
+def _sweeps(key, v):
+    """A non-empty list of `[from, to]` link angles [rad], each a sweep that moves."""
+    ok = (
+        isinstance(v, list)
+        and v
+        and all(
+            isinstance(p, list)
+            and len(p) == 2
+            and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in p)
+            and p[0] != p[1]
+            for p in v
+        )
+    )
+    if not ok:
+        raise ConfigError(
+            f"{key} must be a non-empty list of [from, to] link angles in rad that differ, "
+            f"e.g. [[-1.2, 1.2]], got {v!r}"
+        )
+    return [[float(a), float(b)] for a, b in v]
+
+
 def _optional(check: Check, none_value=0) -> Check:
     """`none_value` (TOML has no null) means "not set"."""
 
@@ -121,7 +142,7 @@ def _optional(check: Check, none_value=0) -> Check:
 
 
 SCENARIOS = ("slow", "fast", "sudden", "static")
-DATA_KINDS = ("plant", "files", "synthetic")
+DATA_KINDS = ("plant", "files", "synthetic", "real_log")
 
 # table -> key -> (default, check). The default `...` means "required".
 SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
@@ -154,6 +175,17 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         # synthetic (generated from the compliance model itself; no plant needed)
         "n_samples": (20000, _int(100)),
         "noise_arcsec": (1.0, _num(lo=0.0)),
+        # real_log: the plant (preset, effects) on one-way sweeps, read as a real log reads it
+        "sweeps": ([[-1.2, 1.2]], _sweeps),
+        "speed": (0.4, _num(positive=True)),
+        "test_sweeps": ([[-1.0, 1.1]], _sweeps),
+        "test_speed": (0.3, _num(positive=True)),
+        "sample_period": (1e-3, _num(positive=True)),
+        "jitter": (0.2, _num(lo=0.0, hi=0.49)),
+        "drop": (0.01, _num(lo=0.0, hi=0.49)),
+        "skew_ms": (0.0, _num()),
+        "encoder_bits": (24, _int(8, 40)),
+        "hold": (1, _int(1)),
     },
     "model": {
         "n_segments": (5, _int(1, 20)),
