@@ -487,13 +487,26 @@ def _shortest_text(values: Float[np.ndarray, " n"]) -> np.ndarray:
     return out
 
 
+CSV_BLOCK = 65536
+"""Rows formatted at a time by [`csv_bytes`][] (its text memory is bounded by the block)."""
+
+
 def csv_bytes(columns: dict[str, Float[ArrayLike, " n"]]) -> bytes:
-    """Columns (name -> values) as the bytes of a CSV file: a header of the names, then one
-    row per sample, each value in the fewest digits that read back to the same float64."""
+    """Columns (name -> values, all of one length) as the bytes of a CSV file: a header of the
+    names, then one row per sample, each value in the fewest digits that read back to the same
+    float64. Rows are formatted `CSV_BLOCK` at a time."""
     names = list(columns)
-    texts = [_shortest_text(columns[k]) for k in names]
-    lines = [",".join(names)] + [",".join(row) for row in zip(*texts)]
-    return ("\n".join(lines) + "\n").encode()
+    values = [np.asarray(columns[k], np.float64).reshape(-1) for k in names]
+    lengths = {v.size for v in values}
+    if len(lengths) > 1:
+        sizes = ", ".join(f"{k}: {v.size}" for k, v in zip(names, values))
+        raise ValueError(f"csv_bytes: the columns differ in length ({sizes})")
+    n = lengths.pop() if lengths else 0
+    parts = [(",".join(names) + "\n").encode()]
+    for lo in range(0, n, CSV_BLOCK):
+        texts = [_shortest_text(v[lo : lo + CSV_BLOCK]) for v in values]
+        parts.append(("\n".join(",".join(row) for row in zip(*texts)) + "\n").encode())
+    return b"".join(parts)
 
 
 def save_csv(recording: Recording, path: PathLike) -> None:

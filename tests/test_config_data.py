@@ -160,6 +160,18 @@ def test_real_log_kind_simulates_two_motions_read_as_a_robot_log():
     span = lambda r: float(np.ptp(np.asarray(r.theta_l)))  # noqa: E731
     assert abs(span(train) - span(test)) > 0.05, (span(train), span(test))
     assert any("skew 1.5 ms" in p for p in ds.provenance), ds.provenance
-    for bad in ([[1.0, 1.0]], [[1.0]], [], "x"):
+    cfg = REPO / "experiments" / "real_log.toml"
+    for bad in ([[1.0, 1.0]], [[1.0]], [], "x", [[0.0, math.inf]], [[math.nan, 1.0]]):
         with pytest.raises(ConfigError, match="sweeps must be a non-empty list"):
-            load_experiment(REPO / "experiments" / "real_log.toml", {"data.sweeps": bad})
+            load_experiment(cfg, {"data.sweeps": bad})
+    for key, bad, words in (
+        ("data.encoder_bits", 36, "encoder_bits must be <= 32"),
+        ("data.sample_period", 1e-5, "sample_period must be >= 0.00025"),
+    ):
+        with pytest.raises(ConfigError, match=words):
+            load_experiment(cfg, {key: bad})
+    with pytest.raises(ConfigError, match="take about .* s to simulate"):
+        build_dataset(load_experiment(cfg, {"data.speed": 1e-4}))
+    # a sweep that starts where the last one ended needs no move between them (it divided by 0)
+    again = build_dataset(load_experiment(cfg, short | {"data.sweeps": [[-0.3, 0.3], [0.3, 0.0]]}))
+    assert np.all(np.isfinite(np.asarray(again.train[0].torque)))

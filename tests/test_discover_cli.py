@@ -358,3 +358,46 @@ def test_config_families_restrict_the_library(files, tmp_path, capsys):
         assert _discover_cli(["--config", config(bad), "--out", tmp_path / "o2"]) == 2
         _one_line_error(capsys, "[discover] families", *words)
         assert not (tmp_path / "o2").exists()
+
+
+def test_a_discover_files_settings_are_checked_and_the_command_line_wins(
+    files, tmp_path, capsys, monkeypatch
+):
+    # every [discover] value is checked before anything runs (one line naming the key); a
+    # setting given on the command line (--chunk, --max-effects) overrides the file's
+    from hdjax.discover import _loop
+
+    def config(lines):
+        cfg = tmp_path / "disc.toml"
+        cfg.write_text(
+            "[joint]\nratio = 160\nrated_torque = 400\n"
+            f'[data]\ntrain = "{files / "train.csv"}"\ntest = "{files / "test.csv"}"\n'
+            f"[discover]\n{lines}\n"
+        )
+        return cfg
+
+    for lines, words in (
+        ('max_effects = "five"', "max_effects must be a whole number >= 0"),
+        ("max_effects = 2.9", "max_effects must be a whole number >= 0"),
+        ("min_gain = 1.5", "min_gain must be a number in (0, 1)"),
+        ("min_gain = true", "min_gain must be a number in (0, 1)"),
+        ("n_segments = 0", "n_segments must be a whole number from 1 to 20"),
+        ("poly_order = -2", "poly_order must be a whole number from 0 to 12"),
+        ('ignore_columns = "temp"', "ignore_columns must be a list of column names"),
+        ("chunk = 3", "chunk must be 0 (the whole record at once) or at least 16"),
+    ):
+        out = tmp_path / "o"
+        assert _discover_cli(["--config", config(lines), "--out", out]) == 2, lines
+        _one_line_error(capsys, "[discover]", words)
+        assert not out.exists()
+    seen = []
+
+    def stop(train, test, joint, options, **kw):
+        seen.append(options)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(_loop, "discover", stop)
+    cfg = config("chunk = 0\nmax_effects = 4")
+    for extra, chunk, most in (([], 0, 4), (["--chunk", "64", "--max-effects", "1"], 64, 1)):
+        _discover_cli(["--config", cfg, "--out", tmp_path / "p", "--quiet", *extra])
+        assert (seen[-1].chunk, seen[-1].max_effects) == (chunk, most), seen[-1]

@@ -12,6 +12,7 @@ velocity, and the network with Kalman-filtered current, raw and periodic angles.
 """
 
 import dataclasses
+from pathlib import Path
 
 import equinox as eqx
 import jax
@@ -446,3 +447,47 @@ def test_counts_per_rev_come_from_the_joint_or_the_options():
     for bad in (0, -5, 2.5, True, "12x", 2**53 + 1):
         with pytest.raises(hdjax.ConfigError, match="whole number of encoder counts"):
             export.check_counts_per_rev(bad, "--counts-per-rev-m")
+
+
+def _fused_multiply_add_flags() -> tuple[str, ...] | None:
+    """Flags under which GCC contracts a multiply and an add across statements (its default
+    `gnu` mode, with FMA instructions), where this CPU runs them; None elsewhere."""
+    import platform
+
+    if platform.machine() == "aarch64":
+        return ("-std=gnu99",)
+    if platform.machine() == "x86_64":
+        try:
+            flags = Path("/proc/cpuinfo").read_text().split()
+        except OSError:
+            return None
+        return ("-std=gnu99", "-mfma") if "fma" in flags else None
+    return None
+
+
+def test_the_count_conversion_survives_fused_multiply_add(tmp_path, compiler):
+    # GCC's default mode fuses `m *= scale; m += offset` into one multiply-add on FMA targets,
+    # rounding once instead of twice: the angles then differ from the reader's by an ulp in a
+    # share of the samples (the product goes through volatile, so they do not)
+    flags = _fused_multiply_add_flags()
+    if flags is None:
+        pytest.skip("this CPU runs no fused multiply-add instruction the compiler can be asked for")
+    code = export.counts_c(export.compliance_c(MODELS["paper_shared"](), precision="double"),
+                           2**21, 3 * 2**20)  # fmt: skip
+    lib = export.build_library(code, tmp_path, extra=flags)
+    rng = np.random.default_rng(11)
+    c_m = rng.integers(-(2**40), 2**40, 20000)
+    c_l = rng.integers(-(2**30), 2**30, 20000)
+    x = np.zeros((c_m.size, 4))
+    x[:, 0] = np.arange(c_m.size) * 1e-3
+    maps = [{"counts_per_rev": 2**21, "offset": 0.123456789}, {"counts_per_rev": 3 * 2**20,
+            "offset": -2.5e-3}]  # fmt: skip
+    want = [
+        hdjax.ColumnMap.from_dict({"columns": {"theta_m": {"source": "a", **m}}})
+        .columns["theta_m"]
+        .apply(c)
+        for m, c in zip(maps, (c_m, c_l))
+    ]
+    _, _, stepped = lib.run_counts(x, c_m, c_l, zero=(0, 0), offset=(0.123456789, -2.5e-3))
+    np.testing.assert_array_equal(stepped[:, 1], want[0])
+    np.testing.assert_array_equal(stepped[:, 2], want[1])

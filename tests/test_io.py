@@ -51,6 +51,9 @@ def test_csv_values_in_their_shortest_exact_digits():
     back = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
     for j, values in enumerate(cols.values()):
         np.testing.assert_array_equal(back[:, j], values)
+    assert lines[6].split(",")[2] == "-0" and np.signbit(back[5, 2])  # -0.0 stays negative
+    with pytest.raises(ValueError, match="differ in length"):
+        csv_bytes({"a": np.zeros(3), "b": np.zeros(2)})
 
 
 def test_plain_csv_without_torque_keeps_extras(tmp_path):

@@ -3,7 +3,6 @@
 import ast
 import importlib
 import pkgutil
-import sys
 import warnings
 from pathlib import Path
 
@@ -55,8 +54,8 @@ def test_every_package_all_lists_what_it_imports():
         assert set(module.__all__) == imported, (init, set(module.__all__) ^ imported)
 
 
-def test_discover_api_page_opens_with_the_loop():
-    sys.path.insert(0, str(ROOT.parent / "docs" / "_gen"))
+def test_discover_api_page_opens_with_the_loop(monkeypatch):
+    monkeypatch.syspath_prepend(str(ROOT.parent / "docs" / "_gen"))
     from reference import exported_names
 
     assert exported_names("hdjax.discover")[:2] == ["discover", "DiscoverOptions"]

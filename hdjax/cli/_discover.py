@@ -113,12 +113,12 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument(
         "--chunk",
         type=int,
-        default=0,
+        default=None,
         metavar="N",
         help="accumulate the loop's least-squares fits (calibration, cross-validation, "
         "candidate scores, intervals) over chunks of N samples (at least 16), so no design of "
         "the whole record is held, and parse --train and --test N rows at a time; 0: the whole "
-        "record at once (default 0)",
+        "record at once (default: the discover file's [discover] chunk, else 0)",
     )
     p.add_argument(
         "--ignore-column",
@@ -147,7 +147,8 @@ def run(args: argparse.Namespace) -> int:
     inputs = [args.train, args.test, args.joint, args.config]
     if args.config is not None:
         inputs += _config_inputs(args.config)
-    check_chunk(args.chunk, "--chunk")
+    if args.chunk is not None:
+        check_chunk(args.chunk, "--chunk")
     # the memory guard counts whole-file parsing even with --chunk: the loop itself needs about
     # as much per sample as a parse (measured), so the guard stays conservative
     check_read_memory(inputs[:2] + inputs[4:], fix="give shorter --train and --test logs")
@@ -208,9 +209,8 @@ def _run_into(rd, args: argparse.Namespace) -> int:
         cfg,
         max_effects=args.max_effects,
         min_gain=args.min_gain,
-        chunk=check_chunk(
-            cfg.get("chunk", args.chunk), "[discover] chunk" if "chunk" in cfg else "--chunk"
-        ),
+        # the command line's --chunk, when given, over the file's (checked where each was read)
+        chunk=args.chunk if args.chunk is not None else cfg.get("chunk", 0),
     )
     ignore = tuple(args.ignore_column) + tuple(cfg.get("ignore_columns", ()))
     notes = check_inputs(

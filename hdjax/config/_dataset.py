@@ -239,6 +239,10 @@ def _plant_params(data: dict):
     return params if not data["effects"] else plant.with_effects(params, dict(data["effects"]))
 
 
+MAX_REAL_LOG_S = 600.0
+"""The longest `kind = "real_log"` recording [s] (its simulation runs at a 0.25 ms step)."""
+
+
 def _from_real_log(exp, joint: Joint, say) -> Dataset:
     """`kind = "real_log"`: the plant on one-way sweeps from rest under gravity with pauses,
     read through a real log's sensors ([`hdjax.plant.simulate_real_log`][]): jittered time
@@ -262,6 +266,17 @@ def _from_real_log(exp, joint: Joint, say) -> Dataset:
         offset_seed=seed,
     )
     params = _plant_params(data)
+    for key in ("sweeps", "test_sweeps"):
+        speed = data["speed" if key == "sweeps" else "test_speed"]
+        ends = [a for pair in data[key] for a in pair]
+        path = sum(abs(b - a) for a, b in zip(ends, ends[1:]))
+        seconds = path / speed + 2.0 * len(data[key]) + 2.0  # the moves, their ramps and pauses
+        if seconds > MAX_REAL_LOG_S:
+            raise ConfigError(
+                f"[data] {key} at {speed:g} rad/s take about {seconds:.0f} s to simulate, over "
+                f"the {MAX_REAL_LOG_S:.0f} s a real_log recording may last: give shorter sweeps "
+                "or a higher speed"
+            )
     parts, prov = {}, []
     for role, s, sweeps, speed in (
         ("calibration", seed + data["train_seed_offset"], data["sweeps"], data["speed"]),

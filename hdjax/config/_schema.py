@@ -10,6 +10,7 @@ configuration (defaults filled in), which each result directory keeps as
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable, Mapping
 
@@ -119,14 +120,17 @@ def _sweeps(key, v):
         and all(
             isinstance(p, list)
             and len(p) == 2
-            and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in p)
+            and all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                for x in p
+            )
             and p[0] != p[1]
             for p in v
         )
     )
     if not ok:
         raise ConfigError(
-            f"{key} must be a non-empty list of [from, to] link angles in rad that differ, "
+            f"{key} must be a non-empty list of [from, to] finite link angles in rad that differ, "
             f"e.g. [[-1.2, 1.2]], got {v!r}"
         )
     return [[float(a), float(b)] for a, b in v]
@@ -180,11 +184,11 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
         "speed": (0.4, _num(positive=True)),
         "test_sweeps": ([[-1.0, 1.1]], _sweeps),
         "test_speed": (0.3, _num(positive=True)),
-        "sample_period": (1e-3, _num(positive=True)),
+        "sample_period": (1e-3, _num(lo=2.5e-4)),  # the real-log plant steps at 0.25 ms
         "jitter": (0.2, _num(lo=0.0, hi=0.49)),
         "drop": (0.01, _num(lo=0.0, hi=0.49)),
         "skew_ms": (0.0, _num()),
-        "encoder_bits": (24, _int(8, 40)),
+        "encoder_bits": (24, _int(8, 32)),
         "hold": (1, _int(1)),
     },
     "model": {
@@ -334,11 +338,9 @@ def check_used(given: Mapping, model: Mapping, where: str) -> None:
 
 
 def _copy(v):
-    if isinstance(v, list):
-        return list(v)
-    if isinstance(v, dict):
-        return dict(v)
-    return v
+    """A default's own copy, nested lists and tables included (a resolved config never shares
+    a list with the schema)."""
+    return copy.deepcopy(v)
 
 
 def _cross_checks(cfg: dict, where: str) -> None:

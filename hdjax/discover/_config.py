@@ -32,6 +32,7 @@ from .._errors import ConfigError, check_keys, did_you_mean
 from .._io import ColumnMap, read_toml
 from .._joint import Joint
 from ..reference import load_referenced
+from ._chunked import check_chunk
 from ._options import DiscoverOptions
 
 _DATA_KEYS = ("path", "train", "test", "test_blocks", "columns", "extras", "encoding", "reference")
@@ -100,10 +101,7 @@ def load_discover_config(path, with_context: bool = False):
         context = None
     else:
         raise ConfigError(f"{path} [data]: give either 'path' or both 'train' and 'test'")
-    options = doc.get("discover", {})
-    check_keys(options, _DISCOVER_KEYS, f"{path} [discover]")
-    if "families" in options:
-        options = {**options, "families": check_families(options["families"], path)}
+    options = check_discover_table(doc.get("discover", {}), path)
     if with_context:
         return train, test, joint, options, notes, context
     return train, test, joint, options, notes
@@ -129,6 +127,44 @@ def discover_options(
         library=dataclasses.replace(d.library, families=cfg.get("families", d.library.families)),
         chunk=chunk,
     )
+
+
+_WHOLE = {
+    "max_effects": (0, None),
+    "n_segments": (1, 20),
+    "poly_order": (0, 12),
+    "fourier_order": (0, 12),
+}
+"""Whole-number settings of `[discover]`: (least, most) allowed (as `[model]`'s for the last
+three)."""
+
+
+def check_discover_table(table, path) -> dict:
+    """The `[discover]` table of a discover file, every value checked before anything runs: a
+    [`hdjax.ConfigError`][] names the key, the value and what it must be."""
+    where = f"{path} [discover]"
+    if not isinstance(table, dict):
+        raise ConfigError(f"{where}: expected a table of settings, got {table!r}")
+    check_keys(table, _DISCOVER_KEYS, where)
+    out = dict(table)
+    for key, (lo, hi) in _WHOLE.items():
+        v = table.get(key, lo)
+        if isinstance(v, bool) or not isinstance(v, int) or v < lo or (hi is not None and v > hi):
+            span = f"from {lo} to {hi}" if hi is not None else f">= {lo}"
+            raise ConfigError(f"{where} {key} must be a whole number {span}, got {v!r}")
+    v = table.get("min_gain", 0.05)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v < 1.0:
+        raise ConfigError(f"{where} min_gain must be a number in (0, 1), got {v!r}")
+    v = table.get("ignore_columns", [])
+    if not isinstance(v, list) or not all(isinstance(c, str) and c for c in v):
+        raise ConfigError(
+            f'{where} ignore_columns must be a list of column names, e.g. ["temp"], got {v!r}'
+        )
+    if "chunk" in table:
+        out["chunk"] = check_chunk(table["chunk"], f"{where} chunk")
+    if "families" in table:
+        out["families"] = check_families(table["families"], path)
+    return out
 
 
 def check_families(value, path) -> tuple[str, ...]:

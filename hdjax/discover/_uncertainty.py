@@ -248,9 +248,10 @@ def effect_intervals(
     **Arguments:** `model` (calibrated on `data`), `design` (its design matrix on `data`, with
     the same hysteresis driver as at calibration), `estimate` (its torque estimate on `data`,
     where the local compliance is read), `length` (bootstrap block length in samples),
-    `instruments` (optional: the design evaluated at [`instrument_torque`][], or with `chunks`
-    the `Chunks` of that torque; with it the amplitudes are two-stage least-squares estimates,
-    which the torque sensor's noise does not bias), `chunks` (instead of `design`: the record
+    `instruments` (optional: the design evaluated at [`instrument_torque`][] on
+    [`instrumented_signals`][], or with `chunks` the `Chunks` of those; with it the amplitudes
+    are two-stage least-squares estimates, which neither the torque sensor's noise nor the load
+    encoder's in the link speed biases), `chunks` (instead of `design`: the record
     with the same driver, whose design rows are formed chunk by chunk for the Gram matrix and
     the projections, [`partial_out_chunked`][]).
 

@@ -12,8 +12,10 @@ below 2^53), `scale = 2 pi / N` rounded to double once, then
 same order, in double, so that its angles equal the reader's to the bit:
 `theta = ((double)counts - (double)zero) * HDJAX_RAD_PER_COUNT + offset`, with `zero` the first
 count (or 0) and `offset` the number (or 0.0); subtracting an exact 0.0 and adding 0.0 change
-nothing. The multiply and the add are separate statements, so that no compiler fuses them (ISO
-C contracts within one expression at most; GCC does not contract under `-std=c99`).
+nothing. The product is stored through a `volatile double` before the offset is added, so that
+no compiler fuses the multiply and the add into one fused multiply-add (ISO C contracts within
+one expression at most, but GCC's default `gnu` modes contract across statements on targets
+with FMA, aarch64 among them); whatever the flags, the angles are the reader's.
 
 The counts per revolution are the joint's (`encoder_bits_motor`, `encoder_bits_load`: 2^bits)
 unless given (`hdjax export --counts-per-rev-m N --counts-per-rev-l N`); without both the
@@ -119,15 +121,18 @@ void hdjax_sample_from_counts(hdjax_sample *x, double t, long long counts_m,
                               const hdjax_counts_offset *z)
 {
     /* as hdjax's reader: each count a double, less the zero (in double), times the scale,
-       plus the offset, each rounded on its own (separate statements: never fused) */
+       plus the offset, each rounded on its own (the products stored through volatile, so no
+       compiler fuses them with the add into a multiply-add, whatever its flags) */
     double m = (double)counts_m;
     double l = (double)counts_l;
     if (z) {
         m -= (double)z->zero_m;
         l -= (double)z->zero_l;
     }
-    m *= HDJAX_RAD_PER_COUNT_M;
-    l *= HDJAX_RAD_PER_COUNT_L;
+    volatile double pm = m * HDJAX_RAD_PER_COUNT_M;
+    volatile double pl = l * HDJAX_RAD_PER_COUNT_L;
+    m = pm;
+    l = pl;
     if (z) {
         m += z->offset_m;
         l += z->offset_l;

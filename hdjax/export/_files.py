@@ -258,9 +258,8 @@ double torque = hdjax_step(&est, &x);
         "in double, as hdjax's reader does (`HDJAX_RAD_PER_COUNT_x` is `2 pi / counts_per_rev` "
         "rounded once), so its angles equal hdjax's to the bit for counts up to 2^53; pass "
         "`NULL` for no offset. The step then equals `hdjax estimate --causal` of a log read with "
-        "these `counts_per_rev` and the same offsets. Compile with `-std=c99` (or "
-        "`-ffp-contract=off`) "
-        "where the target has fused multiply-add."
+        "these `counts_per_rev` and the same offsets, with any compiler flags (the "
+        "products pass through `volatile`, so no multiply-add fuses them with the offset)."
     )
     return call, text
 

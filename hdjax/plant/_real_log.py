@@ -51,6 +51,9 @@ def _profile(t, t0, distance, speed, ramp):
     move's end time."""
     sgn = math.copysign(1.0, distance)
     d = abs(distance)
+    if d == 0.0:  # no move (a sweep that starts where the last one ended)
+        zero = np.zeros_like(t)
+        return zero, zero, zero, t0
     ramp = min(ramp, d / speed)  # a short move never reaches full speed
     cruise = max(0.0, d / speed - ramp)
     dur = cruise + 2.0 * ramp
