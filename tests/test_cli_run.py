@@ -7,6 +7,7 @@ import sys
 import numpy as np
 import pytest
 
+import hdjax
 from hdjax import Joint, save_csv
 from hdjax.cli import main
 from hdjax.compliance import estimate_torque
@@ -241,3 +242,25 @@ def test_python_dash_m_hdjax():
         [sys.executable, "-m", "hdjax", "--version"], capture_output=True, text=True, timeout=120
     )
     assert res.returncode == 0 and res.stdout.startswith("hdjax ")
+
+
+def test_save_logs_writes_the_recordings_and_a_discover_file_that_runs(tmp_path):
+    # [outputs] save_logs: the run's recordings as CSV (read back equal) and discover.toml,
+    # which hdjax discover runs as written (its paths relative to it)
+    from .conftest import REPO
+
+    out = tmp_path / "run"
+    cfg = REPO / "experiments" / "synthetic.toml"
+    argv = ["run", str(cfg), "--out", str(out), "--no-figures", "--no-network", "-q"]
+    argv += ["--set", "data.n_samples=4000", "--set", "outputs.save_logs=true"]
+    assert main(argv) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["logs"]["files"] == ["logs/train.csv", "logs/test_synthetic.csv"]
+    back = hdjax.load_recording(out / "logs" / "train.csv")
+    assert back.n_samples == 4000 and back.torque is not None
+    assert "## The logs" in (out / "report.md").read_text()
+    disc = tmp_path / "disc"
+    argv = ["discover", "--config", str(out / "discover.toml"), "--out", str(disc)]
+    assert main([*argv, "--max-effects", "1", "--no-figures", "--quiet"]) == 0
+    rep = json.loads((disc / "report.json").read_text())
+    assert rep["baseline"]["rms"] > 0 and rep["train"].endswith("train.csv")

@@ -8,8 +8,10 @@ from pathlib import Path
 # compliance.estimate_torque is looked up at each call (a test stops the command there)
 from .. import compliance
 from .._errors import ConfigError, InversionError
+from .._io import csv_bytes
 from ..compliance import calibration_messages, check_invertible
 from ..config import (
+    StreamedDataset,
     build_dataset,
     dumps_toml,
     load_experiment,
@@ -237,6 +239,14 @@ def run_experiment(exp, rd, progress, *, force: bool = False) -> str:
             meta={"experiment": cfg["experiment"]["name"], "seed": seed, "data": ds.provenance},
         )
         rd.files.append("model.json")
+    if outputs["save_logs"]:
+        metrics["logs"] = save_logs(rd, ds, cfg)
+        logs = metrics["logs"]
+        progress(
+            "wrote the logs and discover.toml: next, hdjax discover --config OUT/discover.toml"
+            if logs["written"]
+            else f"logs not written ([outputs] save_logs): {logs['why']}"
+        )
     metrics["wall_s"] = time.perf_counter() - t_start
     header = (
         f"Resolved configuration of experiment {cfg['experiment']['name']!r} "
@@ -254,6 +264,35 @@ def _row(metrics: dict, method: str, scenario: str):
     d = metrics.get(method, {}).get("scenarios") or {}
     m = d.get(scenario)
     return (None, None, None) if m is None else (m["max"], m["rms"], m["max_pct"])
+
+
+def save_logs(rd: ResultDir, ds, cfg: dict) -> dict:
+    """`[outputs] save_logs`: the run's recordings as CSV in `logs/` (hdjax's own columns, full
+    precision) and `discover.toml`, the residual loop on the first calibration and the first
+    test recording with the run's starting structure. **Returns:** what was written."""
+    if isinstance(ds, StreamedDataset):
+        return {"written": False, "why": "the recordings were streamed from files, not held"}
+    names = {}
+    for i, rec in enumerate(ds.train):
+        names[f"logs/train_{i}.csv" if len(ds.train) > 1 else "logs/train.csv"] = rec
+    for name, rec in ds.test.items():
+        names[f"logs/test_{name}.csv"] = rec
+    for rel, rec in names.items():
+        rd.write_bytes(rel, csv_bytes(rec.to_numpy()))
+    train, test = next(iter(names)), next(k for k in names if k.startswith("logs/test_"))
+    model = cfg["model"]
+    doc = {
+        "joint": ds.joint.to_dict(),
+        "data": {"train": train, "test": test},
+        "discover": {k: model[k] for k in ("n_segments", "poly_order", "fourier_order")},
+    }
+    header = (
+        f"The residual loop on the logs of experiment {cfg['experiment']['name']!r} (written by "
+        "hdjax run with [outputs] save_logs = true).\n"
+        "Run: hdjax discover --config THIS_FILE --out OTHER"
+    )
+    rd.write_text("discover.toml", dumps_toml(doc, header=header))
+    return {"written": True, "files": list(names), "discover": "discover.toml"}
 
 
 def render_report(cfg: dict, metrics: dict, figures: list[tuple[str, str]]) -> str:
@@ -338,6 +377,19 @@ def render_report(cfg: dict, metrics: dict, figures: list[tuple[str, str]]) -> s
             "One call from Python on 100 samples (signals, checks and the jitted estimate), best "
             "of the repeats; the paper's numbers are from an i7-7700H.",
         ]
+    logs = metrics.get("logs") or {}
+    if logs.get("written"):
+        lines += [
+            "",
+            "## The logs",
+            "",
+            f"The recordings of this run are in `logs/` ({', '.join(logs['files'])}). "
+            "`discover.toml` runs the residual loop on them, from the starting structure of "
+            "`[model]` (its paths are relative to it): `hdjax discover --config "
+            "OUT/discover.toml --out DISCOVER_DIR`, with OUT this folder.",
+        ]
+    elif logs:
+        lines += ["", "## The logs", "", f"Not written ([outputs] save_logs): {logs['why']}."]
     if figures:
         lines += ["", "## Figures", ""]
         for rel, caption in figures:

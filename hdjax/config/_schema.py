@@ -235,6 +235,7 @@ SCHEMA: dict[str, dict[str, tuple[object, Check]]] = {
     "outputs": {
         "figures": (True, _bool),
         "save_model": (True, _bool),
+        "save_logs": (False, _bool),
         "timing": (True, _bool),
         "timing_repeats": (20, _int(1)),
         "paper_reference": (False, _bool),
