@@ -316,13 +316,11 @@ def plant_simulator(data: dict):
         )
     import jax
 
-    preset = {"song": "song_params", "hashimoto": "hashimoto_params"}[data["preset"]]
-    params = getattr(plant, preset)()
-    effects = dict(data["effects"]) or None
+    params = _plant_params(data)
 
     def simulate(name: str, duration: float, seed: int) -> Recording:
         key = jax.random.PRNGKey(seed)
-        return scenario(name, key=key, duration=duration, params=params, effects=effects)
+        return scenario(name, key=key, duration=duration, params=params)
 
     return simulate
 
