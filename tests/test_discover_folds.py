@@ -77,8 +77,9 @@ def test_pipeline_signals_do_not_differentiate_across_gaps():
     # first sample after a gap takes the next one's (without the fix it averages over the gap)
     err = np.abs(w - exact)
     assert err.max() < 0.02 * np.abs(exact).max(), err.max()
+    # memory states carry across the 40 ms of dropped samples and restart at the 0.4 s join
     start = np.asarray(data.sig.extras[SEGMENT_START])
-    assert np.flatnonzero(start).tolist() == [0, 300, 500]
+    assert np.flatnonzero(start).tolist() == [0, 500]
 
 
 def test_block_gram_gains_equal_the_exact_cross_validated_gains():

@@ -1,4 +1,6 @@
-"""Aliases: candidates that TRAIN cannot tell apart from the one the loop added.
+"""Aliases: candidates that TRAIN cannot tell apart from the one the loop added, or from one
+already shortlisted; and how well TRAIN determines a candidate beside the model's own columns
+([`determination`][]).
 
 Two candidates are aliases on a record when their columns span the same directions there:
 Coulomb friction at the motor, $\\tanh(\\omega_m/\\omega_s)$, and at the output,
@@ -19,6 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 from ._library import candidate_columns
+from ._pipeline import chunks_of, design
+from ._scores import training_data
 
 ALIAS_COSINE = 0.99
 """Smallest principal-angle cosine at which two candidates count as aliases."""
@@ -72,3 +76,87 @@ def find_aliases(
         if cos >= threshold:
             out.append({"key": key, "cosine": cos})
     return sorted(out, key=lambda d: -d["cosine"])
+
+
+def _strided(n: int, rows) -> np.ndarray:
+    """At most `MAX_ROWS` of the part's rows, evenly strided (indices into the record)."""
+    own = np.arange(n) if rows is None else np.asarray(rows)
+    return own[:: max(1, -(-own.size // MAX_ROWS))]
+
+
+def _model_rows(model, sig, torque, take: np.ndarray, chunk: int) -> np.ndarray:
+    """The rows `take` of `model`'s design on the record, chunk by chunk with a chunk."""
+    if not chunk:
+        return np.asarray(design(model, sig, torque))[take]
+    out = []
+    for lo, hi, _, _, a, _ in chunks_of(sig, torque, chunk).rows(model):
+        sel = take[(take >= lo) & (take < hi)]
+        out.append(np.asarray(a)[sel - lo])
+    return np.concatenate(out)
+
+
+def determination(model, data, estimate_):
+    """`determined(term)`: how well TRAIN determines `term`'s coefficients beside `model`'s,
+    the share of its centred columns' variance (unit-normalised, the worst direction of a
+    group) that the model's own columns do not span: 1 / the variance inflation factor
+    (Belsley, Kuh & Welsch 1980, *Regression Diagnostics*, Section 3.1). Near 0, TRAIN fixes the
+    coefficient only through a small residue, and the fit leans on a cancellation between the
+    term and the model's columns that another regime (a TEST at another speed or over another
+    range) breaks.
+
+    On at most `MAX_ROWS` evenly strided TRAIN rows (`data.rows` where TRAIN is part of a
+    log); with `data.chunk` the model's design is formed chunk by chunk. The model's rows are
+    formed once, at the first call.
+    """
+    sig, torque = training_data(model, data, estimate_)
+    take = _strided(int(np.asarray(torque).shape[0]), data.rows)
+    rows: list[np.ndarray] = []
+
+    def determined(term) -> float:
+        if not rows:
+            rows.append(_model_rows(model, sig, torque, take, data.chunk))
+        cols = np.asarray(candidate_columns(term, sig, torque), np.float64)[take]
+        return unspanned_share(rows[0], cols)
+
+    return determined
+
+
+def unspanned_share(a: np.ndarray, cols: np.ndarray) -> float:
+    """The share of the centred, unit-normalised `cols`' variance that the centred columns of
+    `a` do not span, in the worst direction of `cols` (the smallest eigenvalue of the
+    residual Gram matrix): $1 - R^2$ of one column regressed on `a` with an intercept; 0 for
+    a constant or non-finite column."""
+    a = np.asarray(a, np.float64)
+    cols = np.asarray(cols, np.float64)
+    a = a - a.mean(axis=0, keepdims=True)
+    keep = np.sqrt((a * a).sum(axis=0)) > 0.0
+    c = cols - cols.mean(axis=0, keepdims=True)
+    norms = np.sqrt((c * c).sum(axis=0))
+    if not np.all(norms > 0.0) or not np.all(np.isfinite(c)):
+        return 0.0
+    c = c / norms
+    u, sv, _ = np.linalg.svd(a[:, keep], full_matrices=False)
+    u = u[:, sv > sv[0] * 1e-10] if sv.size else u[:, :0]
+    r = c - u @ (u.T @ c)
+    return float(np.clip(np.linalg.eigvalsh(r.T @ r).min(), 0.0, 1.0))
+
+
+def alias_test(sig, torque, take=None, threshold: float = ALIAS_COSINE):
+    """`aliased(a, b)` for two candidates (anything with a `.candidate.term`): whether their
+    columns on TRAIN span the same directions to `threshold` ([`span_cosine`][]); each
+    candidate's columns are computed once, on at most `MAX_ROWS` strided rows."""
+    take = take or (lambda x: x)
+    cache: dict = {}
+
+    def cols(r):
+        key = r.candidate.key
+        if key not in cache:
+            c = take(np.asarray(candidate_columns(r.candidate.term, sig, torque)))
+            cache[key] = c[:: max(1, -(-c.shape[0] // MAX_ROWS))]
+        return cache[key]
+
+    def aliased(a, b) -> bool:
+        ca, cb = cols(a), cols(b)
+        return ca.shape[1] == cb.shape[1] and span_cosine(ca, cb) >= threshold
+
+    return aliased

@@ -100,15 +100,32 @@ def rank(scored: list[Scored], min_gain: float) -> list[Ranked]:
     return sorted(out, key=lambda r: -r.gain)
 
 
-def eligible(ranked: list[Ranked], options: DiscoverOptions) -> list[Ranked]:
+def eligible(
+    ranked: list[Ranked],
+    options: DiscoverOptions,
+    aliased: Callable[[Ranked, Ranked], bool] | None = None,
+) -> list[Ranked]:
     """The shortlist of [`rank`][]'s ranking: selected by the sparse regression, removing at
     least `min_gain` of the cross-validated twist error on the standard folds, and stable
-    (doing so in at least `min_stability` of the resampled fold assignments)."""
-    return [
-        r
-        for r in ranked
-        if r.selected and r.gain >= options.min_gain and r.stability >= options.min_stability
-    ][: options.n_shortlist]
+    (doing so in at least `min_stability` of the resampled fold assignments); at most
+    `n_shortlist` of them.
+
+    With `aliased(r, s)` (whether TRAIN can tell `r` from an earlier `s`), an alias of a
+    candidate already on the list takes no place of its own: its trial would score the same
+    column again (an encoder skew and viscous friction on the motor and on the output are one
+    speed column on most records), where the place can go to a different reading of the
+    residual. The report still names it among the step's aliases.
+    """
+    out: list[Ranked] = []
+    for r in ranked:
+        if not (r.selected and r.gain >= options.min_gain and r.stability >= options.min_stability):
+            continue
+        if aliased is not None and any(aliased(r, s) for s in out):
+            continue
+        out.append(r)
+        if len(out) == options.n_shortlist:
+            break
+    return out
 
 
 def qualifies(cv_rms: float, current_rms: float, options: DiscoverOptions) -> bool:
@@ -117,20 +134,41 @@ def qualifies(cv_rms: float, current_rms: float, options: DiscoverOptions) -> bo
     return bool(cv_rms <= (1.0 - options.min_torque_gain) * current_rms)
 
 
+COLLINEAR_SHARE = 0.1
+"""A determined share ([`hdjax.discover._aliases.determination`][]) below this, a variance
+inflation factor over 10, marks a seriously collinear candidate (the usual rule of thumb:
+Kutner, Nachtsheim & Neter, *Applied Linear Regression Models*, Section 10.5)."""
+
+DETERMINED_RATIO = 0.5
+"""A seriously collinear tied trial is set aside when another tied trial's determined share is
+more than 1 / this times its own: a variance inflation up to twice the lowest counts as
+equally determined."""
+
+
 def choose(
     trials: list[Trial],
     current: CrossValidation,
     blocks: np.ndarray,
     options: DiscoverOptions,
     notes: list[str],
+    determined: Callable[[Trial], float] | None = None,
 ) -> Trial | None:
     """The trial to add, or `None` (then the loop stops) when none [`qualifies`][].
 
     Of the trials that qualify and lie within one standard error of the lowest
     ([`hdjax.discover._pipeline.within_one_se`][], paired over the held-out `blocks`), the one
-    with the fewest columns (then the lowest error): cross-validated errors the held-out
-    blocks cannot tell apart do not choose; the simpler effect is named, and a richer one must
-    earn its columns.
+    with the fewest columns, then the lowest error: cross-validated errors the held-out blocks
+    cannot tell apart do not choose; the simpler effect is named, and a richer one must earn
+    its columns.
+
+    **Ties.** Trials whose errors differ by less than `min_torque_gain` (the least gain the
+    loop counts, [`qualifies`][]) are tied. A tied trial that is seriously collinear with the
+    model's columns (`determined`, the share of its column variance they do not span, below
+    `COLLINEAR_SHARE`) is set aside when another tied trial is determined more than twice as
+    well (`DETERMINED_RATIO`); the lowest error of the rest is added. Of two effects that fit
+    TRAIN alike, the one whose coefficient TRAIN fixes only through a cancellation with the
+    model's columns (a speed column on a sweep at one speed, where the compliance absorbs it)
+    predicts worst where TEST leaves TRAIN's regime.
     """
     trials = sorted(trials, key=lambda t: t.cv_rms)
     if not trials or not qualifies(trials[0].cv_rms, current.torque_rms, options):
@@ -142,11 +180,36 @@ def choose(
         if qualifies(t.cv_rms, current.torque_rms, options)
         and (t is lowest or within_one_se(t.cv, lowest.cv, blocks))
     ]
-    best = min(near, key=lambda t: (len(t.candidate.term.names()), t.cv_rms))
+    fewest = min(len(t.candidate.term.names()) for t in near)
+    near = [t for t in near if len(t.candidate.term.names()) == fewest]
+    best = near[0]
+    tied = [t for t in near if not qualifies(best.cv_rms, t.cv_rms, options)]
+    if determined is not None and len(tied) > 1:
+        share = {t.key: determined(t) for t in tied}
+        top = max(share.values())
+        kept = [
+            t
+            for t in tied
+            if share[t.key] >= COLLINEAR_SHARE or share[t.key] >= DETERMINED_RATIO * top
+        ]
+        if kept != tied:
+            gone = ", ".join(f"{t.key} ({share[t.key]:.3g})" for t in tied if t not in kept)
+            notes.append(
+                f"{gone}: tied with the best (errors within {_percent(options.min_torque_gain)}"
+                f"), but seriously collinear with the model's columns (a share of its column's "
+                f"variance they do not span below {COLLINEAR_SHARE:g}) and determined less than "
+                f"half as well as {max(kept, key=lambda t: share[t.key]).key} ({top:.3g})"
+            )
+        best = kept[0]
     if best is not lowest:
+        why = (
+            "with fewer columns"
+            if fewest < len(lowest.candidate.term.names())
+            else "tied and better determined by TRAIN"
+        )
         notes.append(
             f"{best.key} ({best.cv_rms:.4g} N·m) chosen over {lowest.key} ({lowest.cv_rms:.4g} "
-            "N·m): within one standard error over the held-out blocks, with fewer columns"
+            f"N·m): within one standard error over the held-out blocks, {why}"
         )
     return best
 

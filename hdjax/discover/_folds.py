@@ -2,8 +2,9 @@
 
 A recording with gaps is a list of contiguous segments. A gap is a time step longer than
 `GAP_FACTOR` (3) median sample periods, which is also what the joins of a block split (TRAIN
-made of every other block, say) look like. Memory states restart at a gap and derivatives never
-cross one (see [`hdjax.discover.pipeline_signals`][]).
+made of every other block, say) look like. Derivatives never cross a gap; memory states carry
+across one up to `MEMORY_GAP` long and restart at a longer one ([`memory_starts`][], used by
+[`hdjax.discover.pipeline_signals`][]).
 
 Cross-validation holds out whole contiguous blocks that never straddle a gap and are no
 shorter than the residual's correlation time (so a held-out block is not predicted from its
@@ -32,6 +33,29 @@ def segment_starts(t) -> np.ndarray:
     if t.size:
         start[0] = True
         start[find_gaps(t, GAP_FACTOR) + 1] = True
+    return start
+
+
+MEMORY_GAP = 0.1
+"""The longest gap [s] a memory state (hysteresis, backlash) carries across.
+
+A rate-independent memory (the Dahl law, Song et al. Fig. 2) changes with the torque path, not
+with time, so across a gap its update takes the torque step over the gap: exact while the
+torque does not reverse inside the gap. The gaps of a real log's dropped samples last
+milliseconds, far shorter than any reversal of a joint's load; restarting the state at each of
+them would throw a one-way sweep's state back to its initial value in mid-motion. Longer gaps,
+where a block split joins its blocks or recordings meet, can hide reversals: there the state
+restarts."""
+
+
+def memory_starts(t) -> np.ndarray:
+    """A boolean per sample, true where memory states restart: the first sample, and after
+    each gap ([`segment_starts`][]) longer than `MEMORY_GAP` or where time does not advance."""
+    t = np.asarray(t, np.float64)
+    start = segment_starts(t)
+    k = np.flatnonzero(start)[1:]
+    step = t[k] - t[k - 1]
+    start[k] = (step > MEMORY_GAP) | (step <= 0)
     return start
 
 

@@ -2,8 +2,9 @@
 
 1. Calibrate the starting model (the paper's, Song et al. Section II) by least squares on the
    training recording. A recording with gaps (time steps over 3 sample periods, or the joins
-   of a block split) is a list of segments: derivatives never cross a gap and memory states
-   restart at one ([`hdjax.discover.pipeline_signals`][]).
+   of a block split) is a list of segments: derivatives never cross a gap; memory states
+   carry across short gaps (dropped samples) and restart at long ones
+   ([`hdjax.discover.pipeline_signals`][]).
 2. Cut TRAIN into whole contiguous blocks, no shorter than the residual's correlation length
    and never across a gap; deal them to `n_folds` folds (interleaved), and again in
    `n_resamples` random balanced deals for stability selection.
@@ -14,12 +15,17 @@
 4. **Screening.** A candidate is eligible when pysindy's STLSQ selects it, it removes at least
    `min_gain` of the cross-validated twist error, and it does so in at least
    `min_stability` of the resampled fold assignments (stability selection).
-5. **Acceptance in the torque domain.** For the `n_shortlist` best eligible candidates, the
-   whole pipeline runs per fold: calibration on the fold's training part, then inversion
-   (eqs. (26)-(27)), with memory states computed causally from the estimate exactly as on
-   TEST. A candidate is added only if it lowers that error by at least `min_torque_gain`; of
-   those, the lowest, or one with fewer columns within one standard error of it (paired over
-   the held-out blocks: the one-standard-error rule). An accepted step never raises it. Stop
+5. **Acceptance in the torque domain.** For the `n_shortlist` best eligible candidates (an
+   alias of one already shortlisted, whose columns span the same directions on TRAIN, takes
+   no place), the whole pipeline runs per fold: calibration on the fold's training part, then
+   inversion (eqs. (26)-(27)), with memory states computed causally from the estimate exactly
+   as on TEST. A candidate is added only if it lowers that error by at least
+   `min_torque_gain`. Of those within one standard error of the lowest (paired over the
+   held-out blocks: the one-standard-error rule), the one with the fewest columns, then the
+   lowest is added; of errors closer than `min_torque_gain` (a tie), one seriously collinear
+   with the model's columns gives way to one TRAIN determines more than twice as well (the
+   share of a column's variance the model's columns do not span,
+   [`hdjax.discover._aliases.determination`][]). An accepted step never raises it. Stop
    when none does, or after `max_effects` effects.
 6. Refit on all of TRAIN, estimate torque on TEST and record the errors. TEST is never used
    to choose. At the end every added effect's amplitude gets a 95 % moving-block bootstrap
@@ -42,7 +48,8 @@ from .._joint import Joint
 from .._metrics import ErrorMetrics, error_metrics
 from .._recording import Recording
 from .._solution import RESULTS, Solution
-from ._aliases import find_aliases
+from ..effects import SEGMENT_START
+from ._aliases import alias_test, determination, find_aliases
 from ._chunked_fits import twist_residual
 from ._closing import closing_notes, effect_amplitudes, left_unexplained, reference_findings
 from ._decision import (
@@ -55,7 +62,7 @@ from ._decision import (
     ranking_rows,
     speed_reading,
 )
-from ._folds import FoldPlan, fold_plan
+from ._folds import MEMORY_GAP, FoldPlan, fold_plan
 from ._options import DiscoverOptions as DiscoverOptions, stopping_rule
 from ._pipeline import (
     PipelineData,
@@ -226,9 +233,11 @@ def _start(train, test, joint, options, phase, notes, say):
         test_data = dataclasses.replace(_as_data(model, test), chunk=options.chunk)
     n_gaps = int(data.starts.sum()) - 1
     if n_gaps:
+        n_mem = int(np.asarray(data.sig.extras[SEGMENT_START]).sum()) - 1
         notes.append(
             f"TRAIN has {n_gaps} gap(s) (time steps over 3 sample periods): {n_gaps + 1} "
-            "segments; memory states restart and derivatives stop at each gap"
+            f"segments; derivatives stop at each gap, memory states restart at the {n_mem} "
+            f"longer than {MEMORY_GAP:g} s and carry across the others"
         )
     with phase("test"):
         base_metrics, base_est = _test_errors(model, test_data, joint.rated_torque)
@@ -371,9 +380,14 @@ def _add_effects(run: _Run, model, est_train, cv):
                 return trial if qualifies(trial.cv_rms, cv.torque_rms, options) else None
             return None
 
-        shortlist = eligible(ranked, options)
+        aliased = alias_test(*training_data(model, data, est_train), take=data.part)
+        shortlist = eligible(ranked, options, aliased)
         trials = _shortlist_trials(shortlist, ranking, try_one, notes, options)
-        best = choose(trials, cv, plan.blocks_rec, options, notes)
+
+        determined = determination(model, data, est_train)
+        best = choose(
+            trials, cv, plan.blocks_rec, options, notes, lambda t: determined(t.candidate.term)
+        )
         if best is None:
             notes.append(no_step_note(trials, shortlist, cv, options))
             break

@@ -1,11 +1,12 @@
 """The whole estimation pipeline, as the loop runs it on TRAIN, on each fold and on TEST.
 
 Everything a candidate is judged by goes through the same three steps: derive the signals
-(derivatives that never cross a gap, a marker where memory states restart), calibrate by least
-squares (Song et al. eqs. (15)-(17)), and invert for torque (eqs. (26)-(27)). Path-dependent
-terms (hysteresis) need a torque path at calibration; it is the model's *own* estimate,
-computed causally exactly as at estimation, found by a few rounds of calibrate-then-estimate
-starting from the previous model's estimate. The reference torque never drives a state.
+(derivatives that never cross a gap, a marker where memory states restart after a long one),
+calibrate by least squares (Song et al. eqs. (15)-(17)), and invert for torque (eqs.
+(26)-(27)). Path-dependent terms (hysteresis) need a torque path at calibration; it is the
+model's *own* estimate, computed causally exactly as at estimation, found by a few rounds of
+calibrate-then-estimate starting from the previous model's estimate. The reference torque
+never drives a state.
 
 The cross-validated torque error refits the structure on each fold's training part (the same
 calibration, the same driver rounds from that fold's previous estimate) and inverts the whole
@@ -37,7 +38,7 @@ from ..compliance._stream_fit import calibrate_chunks
 from ..effects import SEGMENT_START, TORQUE_PATH
 from ._chunked import Chunks
 from ._chunked_fits import ChunkedFoldSolver
-from ._folds import segment_starts
+from ._folds import memory_starts, segment_starts
 
 DRIVER_ROUNDS = 3
 """Calibrate-then-estimate rounds that make a hysteresis state's calibration driver the
@@ -121,7 +122,9 @@ def pipeline_signals(
 ) -> PipelineData:
     """Model signals of a recording with gaps: velocities at the first sample after a gap take
     the next sample's value (a backward difference across a gap is no derivative), and the
-    signal `SEGMENT_START` marks where memory states restart. **Returns:** a PipelineData."""
+    signal `SEGMENT_START` marks where memory states restart: after gaps over 0.1 s
+    (`MEMORY_GAP`; across shorter ones, dropped samples, the state carries on). **Returns:** a
+    PipelineData."""
     sig = signals_from_recording(rec, ratio, twist_sign, velocity=velocity)
     starts = segment_starts(rec.t)
     fix = np.flatnonzero(starts)[1:]
@@ -136,7 +139,7 @@ def pipeline_signals(
             repl[name] = jnp.asarray(w)
         sig = eqx.tree_at(lambda s: (s.omega_m, s.omega_l), sig, (repl["omega_m"], repl["omega_l"]))
     extras = dict(sig.extras)
-    extras[SEGMENT_START] = jnp.asarray(starts.astype(np.float64))
+    extras[SEGMENT_START] = jnp.asarray(memory_starts(rec.t).astype(np.float64))
     sig = eqx.tree_at(lambda s: s.extras, sig, extras)
     torque = None if rec.torque is None else np.asarray(rec.torque, np.float64)
     return PipelineData(sig, torque, starts)

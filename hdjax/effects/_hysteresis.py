@@ -294,8 +294,9 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
 
     **The state at the start.** It runs through each stretch of the record and restarts at
     `SEGMENT_START`: the record's start, where recordings were joined, and, in the residual
-    loop's signals ([`hdjax.discover.pipeline_signals`][]), after each gap in the log (a time
-    step over three sample periods, across which the path is not recorded), from the state
+    loop's signals ([`hdjax.discover.pipeline_signals`][]), after each gap in the log longer
+    than 0.1 s (across a shorter one, dropped samples, the state carries on with the torque
+    step over the gap), from the state
     `initial` $\\zeta$ times the direction of the first motion ([`dahl_initial`][]): 0 for a
     joint that starts unloaded, $-1$ for a one-way sweep from rest that starts with the state its
     last motion, the other way, left. The residual loop chooses $\\zeta$ from $\\{-1, 0, 1\\}$
