@@ -19,7 +19,11 @@ Two kinds of draw, `--draws` of each (seeds and parameters drawn from `--seed`):
 Precision: float64 (x64 on). Prints JSON (every draw, and the share of draws that pass each
 check); writes it to `benchmarks/out/real_log_cases.json`.
 
-    python benchmarks/real_log_cases.py [--draws 10] [--seed 0]
+    python benchmarks/real_log_cases.py [--draws 10] [--seed 0] [--train-speeds 0.4]
+
+With `--train-speeds 0.25,0.4` TRAIN is two sweeps at those speeds joined (1 s apart), so a
+speed-proportional twist (the skew) is no longer a constant while moving; the JSON then goes to
+`benchmarks/out/real_log_cases_speeds.json`.
 """
 
 import argparse
@@ -82,12 +86,31 @@ def _plant(d: dict) -> plant.PlantParams:
     return plant.song_params(defaults=False, effects=eff)
 
 
-def _logs(d: dict):
+def _joined(logs: list) -> "hdjax.Recording":
+    """Recordings of one joint one after the other, 1 s apart (a gap: memory restarts)."""
+    cols = {k: [] for k in ("t", "theta_m", "theta_l", "current", "torque")}
+    t0 = 0.0
+    for rec in logs:
+        t = np.asarray(rec.t)
+        cols["t"].append(t - t[0] + t0)
+        t0 = cols["t"][-1][-1] + 1.0
+        for k in ("theta_m", "theta_l", "current", "torque"):
+            cols[k].append(np.asarray(getattr(rec, k)))
+    joined = {k: np.concatenate(v) for k, v in cols.items()}
+    return hdjax.make_recording(**joined, source="real-log plant, joined sweeps")
+
+
+def _logs(d: dict, train_speeds: tuple[float, ...] = (0.4,)):
     params = _plant(d)
     sensors = plant.RealLogSensors(skew=d["skew_ms"] * 1e-3, offset_seed=d["seed"])
     key = jax.random.key(d["seed"])
     k1, k2 = jax.random.split(key)
-    train = plant.simulate_real_log(params, sensors, key=k1, sweeps=((-1.2, 1.2),), speed=0.4)
+    keys = jax.random.split(k1, len(train_speeds)) if len(train_speeds) > 1 else [k1]
+    train = [
+        plant.simulate_real_log(params, sensors, key=k, sweeps=((-1.2, 1.2),), speed=v)
+        for k, v in zip(keys, train_speeds)
+    ]
+    train = train[0] if len(train) == 1 else _joined(train)
     test = plant.simulate_real_log(params, sensors, key=k2, sweeps=((-1.0, 1.1),), speed=0.3)
     return train, test
 
@@ -105,10 +128,10 @@ def _true_terms(d: dict, train) -> list:
     return terms
 
 
-def run_draw(d: dict) -> dict:
+def run_draw(d: dict, train_speeds: tuple[float, ...] = (0.4,)) -> dict:
     """One draw: discover on its TRAIN and TEST logs, the true structure refitted, the checks."""
     start = time.perf_counter()
-    train, test = _logs(d)
+    train, test = _logs(d, train_speeds)
     res = discover(train, test, JOINT, DiscoverOptions(max_effects=3))
     r = res.aux
     true = refit_structure(train, test, JOINT, _true_terms(d, train))
@@ -145,13 +168,20 @@ def main():
     ap.add_argument("--draws", type=int, default=10, help="draws of each kind")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--kinds", default="skew,hysteresis")
+    ap.add_argument(
+        "--train-speeds",
+        default="0.4",
+        help="comma-separated cruise speeds [rad/s] of TRAIN's sweeps (one log per speed, "
+        "joined; TEST sweeps at 0.3 rad/s)",
+    )
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out")
     args = ap.parse_args()
     t0 = time.perf_counter()
+    speeds = tuple(float(v) for v in args.train_speeds.split(","))
     rows = []
     for kind in args.kinds.split(","):
         for i in range(args.draws):
-            row = run_draw(draw(kind, i, args.seed))
+            row = run_draw(draw(kind, i, args.seed), speeds)
             rows.append(row)
             print(
                 f"[real_log_cases] {kind} {i + 1}/{args.draws}: {row['effects']} "
@@ -172,13 +202,15 @@ def main():
         "precision": "float64",
         "draws_per_kind": args.draws,
         "seed": args.seed,
+        "train_speeds": list(speeds),
         "targets": {"delay_rtol": DELAY_RTOL, "test_over_true": TEST_RATIO},
         "summary": summary,
         "draws": rows,
         "seconds": time.perf_counter() - t0,
     }
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "real_log_cases.json").write_text(json.dumps(out, indent=2, default=str))
+    name = "real_log_cases.json" if speeds == (0.4,) else "real_log_cases_speeds.json"
+    (args.out / name).write_text(json.dumps(out, indent=2, default=str))
     print(json.dumps(out, indent=2, default=str))
 
 

@@ -9,6 +9,8 @@
   other is not chosen, even with the lower error; otherwise, or when not tied, the error
   chooses.
 - An alias of a shortlisted candidate takes no place on the shortlist.
+- A record that moves at one speed is told apart from one whose speed varies: the share of
+  moving samples near the median speed, counted on speed profiles built by hand.
 """
 
 import types
@@ -21,6 +23,7 @@ from hdjax.discover._decision import Ranked, Trial, choose, eligible
 from hdjax.discover._folds import GAP_FACTOR, MEMORY_GAP, memory_starts, segment_starts
 from hdjax.discover._pipeline import CrossValidation, pipeline_signals, within_one_se
 from hdjax.effects import SEGMENT_START
+from hdjax.effects._skew import ONE_SPEED_SHARE, cruise_share
 
 from .discover_data import JOINT, synthetic_recording
 
@@ -124,3 +127,14 @@ def test_an_alias_of_a_shortlisted_candidate_takes_no_place():
     assert keys == ["viscous:omega_m", "hysteresis:torque", "coulomb:omega_l"]
     keys = [r.candidate.key for r in eligible(ranked, options)]
     assert keys == ["viscous:omega_m", "skew:encoders", "viscous:omega_l"]
+
+
+def test_a_sweep_at_one_speed_is_told_from_a_varying_speed():
+    t = np.arange(0.0, 10.0, 1e-3)
+    ramp = np.clip(np.minimum(t - 1.0, 8.0 - t) / 0.5, 0.0, 1.0)  # rest, 0.5 s ramps, cruise
+    share, speed = cruise_share(-0.4 * ramp)
+    cruising = (ramp >= 0.9).sum() / (ramp > 0.02).sum()  # |w| within 10 % of 0.4 rad/s
+    assert speed == 0.4 and abs(share - cruising) < 1e-3 and share > ONE_SPEED_SHARE
+    share, _ = cruise_share(0.4 * np.sin(2 * np.pi * 0.2 * t))  # to and fro, speed varies
+    assert share < 0.2
+    assert cruise_share(np.zeros(100)) == (0.0, 0.0)

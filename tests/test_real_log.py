@@ -116,3 +116,5 @@ def test_hysteresis_from_rest_is_not_taken_for_a_speed_column():
     assert r.effects == ["hysteresis:torque"], r.effects
     assert r.final.rms < r.baseline.rms, (r.final.rms, r.baseline.rms)
     assert any("carry across" in n for n in r.notes), r.notes
+    # and the user is told why a skew could hide here: TRAIN moves at one speed
+    assert any(n.startswith("skew:encoders is barely identified") for n in r.notes), r.notes

@@ -510,6 +510,11 @@ class CandidateContext:
         (both short clauses)."""
         self.unidentified.append(f"{family_name} cannot be identified: {why}; {needs}")
 
+    def barely_identify(self, family_name: str, why: str, needs: str) -> None:
+        """Record that the data identify `family_name` only through a small part of it (it is
+        still offered): `why`, and the data that `needs` (both short clauses)."""
+        self.unidentified.append(f"{family_name} is barely identified: {why}; {needs}")
+
 
 # ---------------------------------------------------------------------------------------------
 # The family

@@ -256,6 +256,31 @@ def current_viscous_slope(
     return float(-beta[3]), float(np.sqrt(max(cov[3, 3], 0.0)))
 
 
+CRUISE_BAND = 0.1
+"""A moving sample cruises when its speed lies within this fraction of the median moving
+speed."""
+
+ONE_SPEED_SHARE = 0.7
+"""A record moves at one speed when more than this share of its moving samples cruise."""
+
+
+def cruise_share(omega: SamplesLike) -> tuple[float, float]:
+    """`(share, speed)`: the share of the moving samples (speed over 2 % of the 99th
+    percentile) whose speed lies within `CRUISE_BAND` of their median speed, and that median
+    [rad/s]. Near 1, a twist proportional to speed (a skew, Song et al. eq. (5) read at two
+    instants; viscous friction) is a constant times the direction while moving, the same
+    column as Coulomb friction and, on a one-way sweep, as an offset the compliance absorbs:
+    only the accelerations tell them apart."""
+    w = np.abs(np.asarray(omega, np.float64))
+    if w.size == 0:
+        return 0.0, 0.0
+    moving = w > 0.02 * np.quantile(w, 0.99)
+    if not moving.any():
+        return 0.0, 0.0
+    speed = float(np.median(w[moving]))
+    return float(np.mean(np.abs(w[moving] - speed) <= CRUISE_BAND * speed)), speed
+
+
 class SkewFamily(AbstractFamily):
     """Encoder time skew: term `EncoderSkew`; one screening candidate at `SCREEN_DELAY`, signed
     as the velocity it follows (no plant effect: the sensor model of
@@ -276,5 +301,16 @@ class SkewFamily(AbstractFamily):
                 "record the joint moving",
             )
             return []
+        share, speed = cruise_share(w)
+        if share > ONE_SPEED_SHARE:
+            ctx.barely_identify(
+                "skew:encoders",
+                f"TRAIN moves at one speed ({speed:.3g} rad/s in {100 * share:.0f} % of its "
+                "moving samples), where a skew's twist, like viscous friction's, is a constant "
+                "while moving that the compliance, Coulomb friction, hysteresis or a harmonic "
+                "of the output angle absorbs, so only the accelerations tell them apart",
+                "record the joint at two or more speeds before trusting a skew, viscous "
+                "friction or their absence",
+            )
         term = EncoderSkew(delay=SCREEN_DELAY, ratio=float(ctx.ratio), sign=float(ctx.twist_sign))
         return [Candidate.of(term)]
