@@ -223,6 +223,15 @@ def held_out_figure(curves: dict, path: Path) -> None:
     save_figure(fig, path)
 
 
+def skew_reading(notes: list[str]) -> str:
+    """The residual loop's own sentence on the encoders' time skew (its delay in ms), from its
+    notes."""
+    said = [n for n in notes if n.startswith("skew:encoders,") or "skew, not friction" in n]
+    if not said:
+        return "The residual loop said nothing about a skew (its family was not offered)."
+    return f"From the residual loop's notes: {said[0]}."
+
+
 def page(result: dict) -> str:
     """docs/lara8-reference.md from the numbers of this run (no number is typed by hand)."""
     h, w = result["held_out"], result["whole_log"]
@@ -342,6 +351,7 @@ def page(result: dict) -> str:
         f"r = {corr['twist_vs_current']:.3f}. The residual loop added "
         f"{'nothing' if not r['song_discover_final']['effects'] else eff} under its stopping "
         "rule.",
+        f"- **Encoder time skew.** {skew_reading(h['discover_notes'])}",
         "- **What the reference itself carries.** The arm's own share of the reference is the "
         "controller's model torque, not a measurement, so any error in that model is an error "
         "of the reference too. Only the payload's share comes from the sensor.",

@@ -5,6 +5,7 @@ Small versions of `benchmarks/real_log_cases.py` and `benchmarks/discover_noise.
 the many-draw statistics): one skew draw, four noisy clean joints.
 """
 
+import re
 import sys
 from pathlib import Path
 
@@ -64,6 +65,19 @@ def test_an_encoder_skew_is_found_as_its_delay(skew_ms):
     true = refit_structure(train, test, JOINT, [EncoderSkew(delay=skew_ms * 1e-3, ratio=160.0)])
     assert r.final.rms <= 1.5 * true.rms, (r.final.rms, true.rms)
     assert any("skew" in n for n in r.notes), r.notes
+
+
+def test_a_skew_the_loop_does_not_add_is_still_reported_in_ms():
+    # with no step allowed, the closing note still reads the delay, in ms, from the skew
+    # family's exact column calibrated into the starting model; removing the reading (or
+    # reading it from the viscous column, in N·m·s/rad) fails this
+    train, test = _logs(-0.49e-3)
+    notes = discover(train, test, JOINT, DiscoverOptions(max_effects=0)).aux.notes
+    line = [n for n in notes if n.startswith("skew:encoders, not added")]
+    assert len(line) == 1, notes
+    m = re.search(r"into the starting model: (\S+) ms \[(\S+), (\S+)\]", line[0])
+    delay, lo, hi = (float(v) for v in m.groups())
+    assert abs(delay + 0.49) <= 0.049 and lo <= -0.49 <= hi, line[0]
 
 
 def test_clean_joints_with_white_encoder_noise_get_no_effect():

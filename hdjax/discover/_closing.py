@@ -6,10 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._errors import CalibrationError, InversionError
+from ..effects import EncoderSkew
+from ..effects._skew import SCREEN_DELAY
 from ..reference import reference_checks
 from ._chunked_fits import twist_residual
 from ._folds import correlation_length
-from ._pipeline import canonical, chunks_of, design
+from ._pipeline import calibrate, canonical, chunks_of, design
 from ._uncertainty import (
     bootstrap_length,
     effect_intervals,
@@ -44,6 +47,67 @@ def effect_amplitudes(model, data, est_train, options) -> list:
     z = data.part(design(model, instrumented_signals(sig_d, data.starts), inst))
     return effect_intervals(
         model, a_final, view, data.part(est_train), length=length, instruments=z
+    )
+
+
+def _skew_row(model, data, est_train, options, joint) -> dict:
+    """The interval row of the skew column calibrated into `model` (raises as `calibrate`)."""
+    term = EncoderSkew(delay=SCREEN_DELAY, ratio=float(joint.ratio), sign=float(joint.twist_sign))
+    with_skew, est = calibrate(model.with_effects(term), data, [], est_train, options.chunk)
+    return effect_amplitudes(with_skew, data, est, options)[-1]
+
+
+def skew_estimate(models, data, options, joint) -> str | None:
+    """The encoders' time skew TRAIN reads, in ms with its 95 % interval, when the loop did
+    not add `skew:encoders`: the skew family's exact column ([`hdjax.effects.EncoderSkew`][])
+    calibrated into the starting and the final model, and bootstrapped as an added effect is.
+    `models` is `[(label, model, TRAIN estimate), ...]`. A delay is a property of the logging,
+    not of the joint, so it is worth a line even when it did not pass the stopping rule; where
+    the readings disagree, the record does not identify it apart from the model's other
+    terms, and the sentence says so. `None` when the skew is in the final model, not among
+    the offered families, or the record never moves."""
+    final = models[-1][1]
+    view = data.view()
+    if (
+        any(t.key == "skew:encoders" for t in final.effect_terms)
+        or "skew:encoders" not in options.library.families
+        or view.sig.t is None
+        or not np.any(np.asarray(view.sig.omega_l) != 0)
+    ):
+        return None
+    readings, rows = [], []
+    for label, model, est in models:
+        try:
+            row = _skew_row(model, data, est, options, joint)
+        except (CalibrationError, InversionError) as err:
+            readings.append(f"into the {label}: not calibrated ({err})")
+            continue
+        if "delay_ms" in row:
+            lo, hi = row["delay_ms_ci95"]
+            rows.append((lo, hi))
+            readings.append(f"into the {label}: {row['delay_ms']:.3g} ms [{lo:.3g}, {hi:.3g}]")
+    if not rows:
+        return None
+    covers = all(lo <= 0.0 <= hi for lo, hi in rows)
+    agree = max(lo for lo, _ in rows) <= min(hi for _, hi in rows)
+    if covers:
+        advice = "every interval covers 0 ms: TRAIN shows no skew"
+    elif not agree:
+        advice = (
+            "the intervals do not overlap, so TRAIN does not tell the skew apart from the "
+            "model's other terms; record the joint at two or more speeds to measure it"
+        )
+    else:
+        advice = (
+            "check the encoders' sampling instants; if the delay is real, correct the "
+            "timestamps and run discover again"
+        )
+    return (
+        "skew:encoders, not added by the loop: the delay between the load and motor encoders "
+        "(positive: the load encoder read later) that TRAIN reads, with 95 % intervals, "
+        + "; ".join(readings)
+        + "; "
+        + advice
     )
 
 

@@ -51,7 +51,13 @@ from .._solution import RESULTS, Solution
 from ..effects import SEGMENT_START
 from ._aliases import alias_test, determination, find_aliases
 from ._chunked_fits import twist_residual
-from ._closing import closing_notes, effect_amplitudes, left_unexplained, reference_findings
+from ._closing import (
+    closing_notes,
+    effect_amplitudes,
+    left_unexplained,
+    reference_findings,
+    skew_estimate,
+)
 from ._decision import (
     Trial,
     choose,
@@ -268,7 +274,7 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
     model, data, test_data, base_metrics, base_est, base_twist, est_train, resid0 = _start(
         train, test, joint, options, phase, notes, say
     )
-    baseline_model = model
+    baseline_model, baseline_est_train = model, est_train
     plan, options = fold_plan(data, test_data, resid0, options, notes)
     with phase("torque CV"):
         cv = cross_validate(model, data, plan.folds_rec, chunk=options.chunk)
@@ -289,9 +295,12 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
         amplitudes = effect_amplitudes(model, data, est_train, options) if steps else []
         for s_, iv in zip(steps, amplitudes):
             s_.amplitude = iv
+        readings = [("starting model", baseline_model, baseline_est_train)]
+        readings += [("final model", model, est_train)] if steps else []
+        skew = skew_estimate(readings, data, options, joint)
     with phase("unexplained"):
         left = left_unexplained(resid, spectra, data, options)
-    notes += list(dict.fromkeys(unidentified))
+    notes += list(dict.fromkeys(unidentified)) + ([skew] if skew else [])
     final = steps[-1].test if steps else base_metrics
     with phase("reference"):
         checks = reference_findings(
