@@ -8,7 +8,6 @@ import numpy as np
 
 from .._errors import CalibrationError, InversionError
 from ..effects import EncoderSkew
-from ..effects._skew import SCREEN_DELAY
 from ..reference import reference_checks
 from ._chunked_fits import twist_residual
 from ._folds import correlation_length
@@ -52,7 +51,8 @@ def effect_amplitudes(model, data, est_train, options) -> list:
 
 def _skew_row(model, data, est_train, options, joint) -> dict:
     """The interval row of the skew column calibrated into `model` (raises as `calibrate`)."""
-    term = EncoderSkew(delay=SCREEN_DELAY, ratio=float(joint.ratio), sign=float(joint.twist_sign))
+    # the screening delay (the family's default): the fit refines it to its fixed point
+    term = EncoderSkew(ratio=float(joint.ratio), sign=float(joint.twist_sign))
     with_skew, est = calibrate(model.with_effects(term), data, [], est_train, options.chunk)
     return effect_amplitudes(with_skew, data, est, options)[-1]
 
