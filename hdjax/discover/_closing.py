@@ -51,9 +51,19 @@ def effect_amplitudes(model, data, est_train, options) -> list:
 
 def _skew_row(model, data, est_train, options, joint) -> dict:
     """The interval row of the skew column calibrated into `model` (raises as `calibrate`)."""
-    # the screening delay (the family's default): the fit refines it to its fixed point
-    term = EncoderSkew(ratio=float(joint.ratio), sign=float(joint.twist_sign))
-    with_skew, est = calibrate(model.with_effects(term), data, [], est_train, options.chunk)
+    # the screening delay (the family's default) on the side the fit finds, not refined to its
+    # fixed point: the column hardly depends on the size of the delay it is built for, only on
+    # which encoder it delays, and a refined delay is a new static field whose programs would
+    # compile again for every record (a reading is not worth that)
+    kw = dict(ratio=float(joint.ratio), sign=float(joint.twist_sign))
+    screen = EncoderSkew(**kw).delay
+    for delay in (screen, -screen):
+        term = EncoderSkew(delay=delay, **kw)
+        with_skew, est = calibrate(
+            model.with_effects(term), data, [], est_train, options.chunk, refine=False
+        )
+        if float(np.asarray(with_skew.coef)[-1]) * delay > 0:
+            break
     return effect_amplitudes(with_skew, data, est, options)[-1]
 
 

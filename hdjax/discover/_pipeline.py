@@ -428,13 +428,16 @@ def calibrate(
     previous_estimate,
     chunk: int = 0,
     fits: list | None = None,
+    refine: bool = True,
 ):
     """Calibrate `structure` on all of `data`; with path terms, driver rounds from
     `previous_estimate`; with `chunk`, the fits accumulated chunk by chunk; terms whose column
-    follows their own coefficient are refitted to their fixed point ([`refined_structure`][]).
+    follows their own coefficient are refitted to their fixed point ([`refined_structure`][];
+    not with `refine=False`: one fit, the columns as given, for a reading whose first-order
+    coefficient is enough and whose programs are then compiled once, not once per record).
     Each fit's Solution is appended to `fits` when given (the last one's value is the model).
     **Returns:** (model, its torque estimate on `data`)."""
-    for _ in range(REFINE_ROUNDS):
+    for _ in range(REFINE_ROUNDS if refine else 1):
         model, est = _calibrate_once(structure, data, notes, previous_estimate, chunk, fits)
         structure = refined_structure(model)
         if structure is None:
