@@ -2,18 +2,18 @@
 
 Candidate scores from per-block Gram statistics (`hdjax.discover._gram`) against the per-fold
 QR of `cv_gains` (standard folds) and explicit refits (a resampled assignment); the per-fold
-torque-CV solve (corrected semi-normal equations) against `scipy.linalg.lstsq` on the copied
-rows. The designs are ill-conditioned on purpose (monomials up to order 6 and blocks of
-different scales), as the loop's are.
+torque-CV solve (corrected semi-normal equations), in memory and chunk by chunk, against
+`scipy.linalg.lstsq` on the copied rows. The designs are ill-conditioned on purpose
+(monomials up to order 6 and blocks of different scales), as the loop's are.
 """
 
 import numpy as np
 import pytest
 import scipy.linalg
 
+from hdjax.discover._fold_solver import FoldSolver, one_block
 from hdjax.discover._folds import contiguous_blocks, fold_assignment
 from hdjax.discover._gram import block_statistics, block_statistics_batched, fold_gains
-from hdjax.discover._pipeline import FoldSolver, _fold_solve
 from hdjax.discover._select import cv_gains, fold_basis
 
 
@@ -116,21 +116,45 @@ def test_scores_do_not_depend_on_the_batches():
         np.testing.assert_allclose(got[1], whole[1], rtol=0, atol=1e-10)
 
 
+def _lstsq(a: np.ndarray, y: np.ndarray) -> np.ndarray:
+    # the reference: QR least squares on the copied rows, zero columns left out
+    s = np.sqrt((a * a).sum(axis=0))
+    keep = s > 0
+    beta = np.zeros(a.shape[1])
+    beta[keep] = scipy.linalg.lstsq(a[:, keep] / s[keep], y)[0] / s[keep]
+    return beta
+
+
+def _chunked(a: np.ndarray, size: int):
+    n = len(a)
+    return lambda: ((lo, min(lo + size, n), a[lo : lo + size]) for lo in range(0, n, size))
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_fold_solver_equals_lstsq_on_the_training_rows(seed):
     a, _, y, blocks = _problem(seed)
+    n = len(y)
     active = np.ones(a.shape[1], bool)
     active[2] = False
-    a[: len(y) // 2, -1] = 0.0  # a column a fold may see only zeros of
-    solver = FoldSolver(a, y, active)
-    for te in fold_assignment(blocks, 5) + [np.arange(len(y) // 2, len(y))]:
-        tr = np.ones(len(y), bool)
-        tr[te] = False
-        ref = np.zeros(a.shape[1])
-        ref[active] = _fold_solve(a[tr][:, active], y[tr])
-        got = solver.solve(te)
-        assert got[~active].tolist() == [0.0] * int((~active).sum())
-        np.testing.assert_allclose(a @ got, a @ ref, rtol=0, atol=1e-7 * np.abs(y).max())
+    a[: n // 2, -1] = 0.0  # a column a fold may see only zeros of
+    rng = np.random.default_rng(seed)
+    for folds in (fold_assignment(blocks, 5), [np.arange(n // 2, n)]):
+        fold_id = np.full(n, -1)  # the half split: the first half trains and is never held out
+        for f, te in enumerate(folds):
+            fold_id[te] = f
+        scored = [np.isin(np.arange(n), te) & (rng.random(n) < 0.7) for te in folds]
+        for rows in (one_block(a), _chunked(a, 999)):
+            solver = FoldSolver(rows, y, fold_id, scored, active)
+            for f, te in enumerate(folds):
+                tr = np.ones(n, bool)
+                tr[te] = False
+                ref = np.zeros(a.shape[1])
+                ref[active] = _lstsq(a[tr][:, active], y[tr])
+                got = solver.solve(f)
+                assert got[~active].tolist() == [0.0] * int((~active).sum())
+                np.testing.assert_allclose(a @ got, a @ ref, rtol=0, atol=1e-7 * np.abs(y).max())
+                w = a[scored[f]] @ got - y[scored[f]]
+                np.testing.assert_allclose(solver.twist_sse(f), w @ w, rtol=1e-9)
 
 
 def test_usable_check_equals_the_whole_array_check():

@@ -190,3 +190,14 @@ class Chunks:
                 yield x, twist, self.torque[lo:hi], np.asarray(seg)[h : h + rows]
 
         return passes
+
+
+def twist_residual(model: ComplianceModel, chunks: Chunks, coef=None) -> Float[np.ndarray, " n"]:
+    """The twist residual $y - A\\beta$ (Song et al. eq. (15)) over the record, the design
+    formed chunk by chunk."""
+    coef = np.asarray(model.coef if coef is None else coef)
+    out = np.empty(chunks.n)
+    y = np.asarray(chunks.sig.twist)
+    for lo, hi, a in chunks.designs(model):
+        out[lo:hi] = y[lo:hi] - a @ coef
+    return out

@@ -9,7 +9,7 @@ import numpy as np
 from .._errors import CalibrationError, InversionError
 from ..effects import EncoderSkew
 from ..reference import reference_checks
-from ._chunked_fits import twist_residual
+from ._chunked import twist_residual
 from ._folds import correlation_length
 from ._pipeline import calibrate, canonical, chunks_of, design
 from ._uncertainty import (

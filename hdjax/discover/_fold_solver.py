@@ -46,16 +46,6 @@ def one_block(a: Float[np.ndarray, "n p"]) -> Rows:
     return lambda: iter([(0, a.shape[0], a)])
 
 
-def structure_shape(model: ComplianceModel, rows: Rows, y, torque):
-    """The shape constraint of `model`'s structure over a row source of its full-layout design
-    (twist `y`, reference `torque`), as the calibration on those rows sets it; `None` when the
-    twist does not rise with the torque there."""
-    data = ShapeData(model, layout="full")
-    for lo, hi, a in rows():
-        data.add(a, y[lo:hi], torque[lo:hi])
-    return ShapeConstraint.of(model, data, np.asarray(model.active))
-
-
 class FoldSolver:
     """Per-fold least squares of the twist over a row source (see the module docstring).
 

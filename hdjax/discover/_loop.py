@@ -50,7 +50,7 @@ from .._recording import Recording
 from .._solution import RESULTS, Solution
 from ..effects import SEGMENT_START
 from ._aliases import alias_test, determination, find_aliases
-from ._chunked_fits import twist_residual
+from ._chunked import twist_residual
 from ._closing import (
     closing_notes,
     effect_amplitudes,

@@ -23,21 +23,19 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy.linalg
 
 from .._custom_types import Array, ArrayLike, Bool, Float, Int, Shaped
 from .._errors import DataError, InversionError
 from .._recording import Recording
 from ..compliance import ComplianceModel, Signals, calibrate_lstsq, signals_from_recording
 from ..compliance._inversion import _invert, _split_effects
-from ..compliance._lstsq import CSNE_MAX_COND, _design, _term_columns, term_signals
+from ..compliance._lstsq import _design, _term_columns, term_signals
 from ..compliance._model import base_term_columns
-from ..compliance._shape import ShapeConstraint, ShapeData, solve_on
-from ..compliance._stream import scaled_cho_factor
+from ..compliance._shape import ShapeConstraint, ShapeData
 from ..compliance._stream_fit import calibrate_chunks
 from ..effects import SEGMENT_START, TORQUE_PATH
 from ._chunked import Chunks
-from ._chunked_fits import ChunkedFoldSolver
+from ._fold_solver import FoldSolver, one_block
 from ._folds import memory_starts, segment_starts
 
 DRIVER_ROUNDS = 3
@@ -540,72 +538,6 @@ class CrossValidation:
         return estimate(self.fold_models[f], data)
 
 
-def _fold_solve(a: np.ndarray, y: np.ndarray) -> np.ndarray:
-    s = np.sqrt((a * a).sum(axis=0))
-    keep = s > 0
-    beta = np.zeros(a.shape[1])
-    beta[keep] = scipy.linalg.lstsq(a[:, keep] / s[keep], y)[0] / s[keep]
-    return beta
-
-
-class FoldSolver:
-    """Least squares of `y` on the `active` columns of the design `a` over a fold's training
-    rows, for every fold of one design, without copying the rows.
-
-    The Gram matrix of the whole record is formed once; a fold's is that minus its held-out
-    rows'. The fold is solved by the corrected semi-normal equations on the Jacobi-scaled Gram
-    matrix (Cholesky, then one refinement step with the true residual of the training rows,
-    as [`hdjax.compliance.calibrate_lstsq`][] does), which gives the least-squares solution to
-    the accuracy of QR while the scaled condition number stays below `CSNE_MAX_COND`; above
-    it, or when the Cholesky factorisation fails, the fold is solved by `scipy.linalg.lstsq`
-    on the copied rows. A column that is zero over the training rows gets no coefficient.
-    """
-
-    def __init__(self, a: np.ndarray, y: np.ndarray, active: np.ndarray, shape=None):
-        self.a, self.y = a, y
-        self.active = np.flatnonzero(active)
-        self.shape = shape
-        act = self.active
-        self.g = (a.T @ a)[np.ix_(act, act)]
-        self.aty = (y @ a)[act]
-        self.nonzero = np.count_nonzero(a, axis=0)[act]
-
-    def solve(self, te: np.ndarray) -> np.ndarray:
-        """Coefficients (all of the design's columns; zero where not active) for held-out
-        rows `te`."""
-        a, y, act = self.a, self.y, self.active
-        coef = np.zeros(a.shape[1])
-        # one gather of rows and columns (indexing the columns of a row copy is ~8x slower)
-        at = a[np.ix_(te, act)]
-        keep = (self.nonzero - np.count_nonzero(at, axis=0)) > 0
-        idx = act[keep]
-        if not keep.all():
-            at = np.compress(keep, at, axis=1)
-        g = self.g[np.ix_(keep, keep)] - at.T @ at
-        aty = self.aty[keep] - at.T @ y[te]
-        d = np.sqrt(np.maximum(np.diag(g), 0.0))
-        chol = None
-        if d.size and np.all(d > 0):
-            chol = scaled_cho_factor(g / np.outer(d, d), CSNE_MAX_COND)
-        if chol is None:
-            train_rows = np.ones(a.shape[0], bool)
-            train_rows[te] = False
-            coef[act] = _fold_solve(a[train_rows][:, act], y[train_rows])
-            return self._constrained(coef, g, idx)
-        fast = chol[0]
-        coef[idx] = scipy.linalg.cho_solve(fast, aty / d, check_finite=False) / d
-        # one refinement step with the true residual over the training rows
-        r = y - a @ coef
-        atr = (r @ a)[idx] - r[te] @ at
-        coef[idx] += scipy.linalg.cho_solve(fast, atr / d, check_finite=False) / d
-        return self._constrained(coef, g, idx)
-
-    def _constrained(self, coef: np.ndarray, g: np.ndarray, idx: np.ndarray) -> np.ndarray:
-        """`coef` projected onto the shape constraint of the full calibration (the fold's
-        Gram matrix `g` over the columns `idx` as the metric), as that calibration is."""
-        return solve_on(self.shape, coef, g, idx)
-
-
 def structure_shape(model: ComplianceModel, a: np.ndarray, y, torque):
     """The shape constraint of `model`'s structure on the rows of its full-layout design `a`
     (twist `y`, reference `torque`), as the calibration on them sets it; `None` when the
@@ -701,7 +633,8 @@ def cross_validate(
     range are kept, so every fold model compiles to the same program. `folds` are the held-out
     rows of each fold (rows of the record; with `data.rows`, among them). Each fold scores the
     held-out rows its training part covers ([`scored_rows`][]). With `chunk`, the fold fits
-    are accumulated over chunks of that many samples ([`ChunkedFoldSolver`][]).
+    are accumulated over chunks of that many samples; in memory and chunked, the folds are
+    solved by the same [`FoldSolver`][hdjax.discover._fold_solver.FoldSolver].
     """
     path = has_path(model)
     active = np.asarray(model.active)
@@ -716,47 +649,52 @@ def cross_validate(
     fit = np.arange(n) if data.rows is None else data.rows
     local = np.full(n, -1)
     local[fit] = np.arange(fit.size)
-    fold_id = np.zeros(n, int)
+    fold_id = np.full(fit.size, -1)
     for f, te in enumerate(folds):
-        fold_id[te] = f
+        fold_id[local[te]] = f
     scored = scored_rows(data, folds)
-    if chunk:
-        masks = [np.isin(np.arange(n), s_) for s_ in scored]
-        chunked = lambda sig, folds_: ChunkedFoldSolver(
-            model, chunks_of(sig, data.torque, chunk), fold_id, masks, folds_
+    masks = []
+    for s_ in scored:
+        masks.append(np.zeros(fit.size, bool))
+        masks[-1][local[s_]] = True
+    shape = None
+
+    def solver_for(sig, folds_):
+        # the design as a row source: chunk by chunk, or the part's rows in one block
+        if chunk:
+            c = chunks_of(sig, data.torque, chunk)
+            rows = lambda: c.designs(model)  # noqa: E731
+        else:
+            rows = one_block(design(model, sig, torque)[fit])
+        return FoldSolver(
+            rows,
+            y[fit],
+            fold_id,
+            masks,
+            active,
+            folds=folds_,
+            shape=shape,
+            model=model,
+            torque=data.torque[fit],
         )
-        fixed_solver = None if path else chunked(data.sig, None)
-        shape = fixed_solver.shape if fixed_solver is not None else None
-    else:
-        fixed = None if path else design(model, data.sig, torque)[fit]
-        shape = None if path else structure_shape(model, fixed, y[fit], data.torque[fit])
-        fixed_solver = None if path else FoldSolver(fixed, y[fit], active, shape)
+
+    fixed_solver = None if path else solver_for(data.sig, None)
+    shape = None if path else fixed_solver.shape
     for f, te in enumerate(folds):
         train_rows = np.zeros(n, bool)
         train_rows[fit] = True
         train_rows[te] = False
         driver = previous.fold_estimate(f, data) if (path and previous is not None) else np.zeros(n)
         for _ in range(rounds):
-            if fixed_solver is not None:
-                solver = fixed_solver
-            elif chunk:
-                solver = chunked(data.with_driver(driver), (f,))
-            else:
-                a = np.asarray(_design(model, data.with_driver(driver), torque))[fit]
-                if shape is None:
-                    shape = structure_shape(model, a, y[fit], data.torque[fit])
-                solver = FoldSolver(a, y[fit], active, shape)
-            coef = solver.solve(local[te] if not chunk else f)
+            solver = fixed_solver or solver_for(data.with_driver(driver), (f,))
+            shape = solver.shape
+            coef = solver.solve(f)
             fold_model = _fold_model(model, coef, data.torque[train_rows])
             est = estimate(fold_model, data)
             driver = np.where(np.isfinite(est), est, 0.0)
+        sse_w += solver.twist_sse(f)
         te = scored[f]
         e = est[te] - data.torque[te]
-        if chunk:
-            sse_w += solver.twist_sse(f)
-        else:
-            w = solver.a[local[te]] @ coef - y[te]
-            sse_w += float(np.sum(w**2))
         sse = float(np.sum(e**2)) if np.all(np.isfinite(e)) else np.inf
         sq[te] = np.where(np.isfinite(e), e**2, np.inf)
         sse_t += sse

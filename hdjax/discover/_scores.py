@@ -8,8 +8,7 @@ import numpy as np
 
 from .._joint import Joint
 from ..compliance import ComplianceModel
-from ._chunked import Chunks, DahlCarry, own_rows, sequential
-from ._chunked_fits import twist_residual
+from ._chunked import Chunks, DahlCarry, own_rows, sequential, twist_residual
 from ._decision import Scored
 from ._gram import block_statistics_batched, block_statistics_streamed, fold_gains
 from ._library import build_library, candidate_columns
