@@ -657,9 +657,8 @@ def cross_validate(
     for s_ in scored:
         masks.append(np.zeros(fit.size, bool))
         masks[-1][local[s_]] = True
-    shape = None
 
-    def solver_for(sig, folds_):
+    def solver_for(sig, folds_, shape=None):
         # the design as a row source: chunk by chunk, or the part's rows in one block
         if chunk:
             c = chunks_of(sig, data.torque, chunk)
@@ -679,14 +678,14 @@ def cross_validate(
         )
 
     fixed_solver = None if path else solver_for(data.sig, None)
-    shape = None if path else fixed_solver.shape
+    shape = None  # found by the first solver, then held for every fold and round
     for f, te in enumerate(folds):
         train_rows = np.zeros(n, bool)
         train_rows[fit] = True
         train_rows[te] = False
         driver = previous.fold_estimate(f, data) if (path and previous is not None) else np.zeros(n)
         for _ in range(rounds):
-            solver = fixed_solver or solver_for(data.with_driver(driver), (f,))
+            solver = fixed_solver or solver_for(data.with_driver(driver), (f,), shape)
             shape = solver.shape
             coef = solver.solve(f)
             fold_model = _fold_model(model, coef, data.torque[train_rows])
