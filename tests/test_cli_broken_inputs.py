@@ -1245,15 +1245,15 @@ class ReachedWork(BaseException):
 def stop_before_work(monkeypatch):
     import hdjax.cli._sweep
     import hdjax.compliance
-    import hdjax.discover._loop
-    import hdjax.pipelines._paper
+    import hdjax.discover.internal
+    import hdjax.pipelines.internal
 
     def stop(*a, **k):
         raise ReachedWork
 
-    monkeypatch.setattr(hdjax.pipelines._paper, "calibrate", stop)
+    monkeypatch.setattr(hdjax.pipelines.internal, "calibrate", stop)
     monkeypatch.setattr(hdjax.compliance, "estimate_torque", stop)
-    monkeypatch.setattr(hdjax.discover._loop, "discover", stop)
+    monkeypatch.setattr(hdjax.discover.internal, "discover", stop)
     monkeypatch.setattr(hdjax.cli._sweep, "_members_nested", stop)
     monkeypatch.setattr(hdjax.cli._sweep, "_member_loop", stop)
 

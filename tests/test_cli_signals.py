@@ -141,7 +141,7 @@ def test_a_swallowed_interrupt_still_ends_the_command(tmp_path, monkeypatch, cap
     """Python drops an exception raised inside some callbacks (JAX's garbage-collection callback
     is one); the signal is remembered and ends the command at its next step, with no result."""
     from hdjax.cli import main
-    from hdjax.pipelines import _paper as _pipeline
+    from hdjax.pipelines import internal as _pipeline
 
     (tmp_path / "cfg.toml").write_text(CONFIG.replace("timing = true", "timing = false"))
     real = _pipeline.calibrate

@@ -365,7 +365,7 @@ def test_a_discover_files_settings_are_checked_and_the_command_line_wins(
 ):
     # every [discover] value is checked before anything runs (one line naming the key); a
     # setting given on the command line (--chunk, --max-effects) overrides the file's
-    from hdjax.discover import _loop
+    from hdjax.discover import internal as _loop
 
     def config(lines):
         cfg = tmp_path / "disc.toml"

@@ -16,7 +16,7 @@ from hdjax.compliance import (
     calibrate_lstsq,
 )
 from hdjax.compliance._inversion import _estimate
-from hdjax.compliance._lstsq import _design
+from hdjax.compliance._lstsq import design_columns
 from hdjax.discover._pipeline import (
     canonical,
     design,
@@ -42,7 +42,7 @@ def test_design_by_terms_equals_the_model_design(per_segment):
     )
     data = pipeline_signals(rec, model.ratio, model.twist_sign, model.velocity)
     sig, torque = data.pair(np.asarray(rec.torque) * 0.9)  # a driver no term here reads
-    expected = np.asarray(_design(model, sig, torque))
+    expected = np.asarray(design_columns(model, sig, torque))
     got = design_by_terms(model, sig, torque)
     assert got.shape == expected.shape == (rec.t.size, model.n_coef)
     np.testing.assert_array_equal(got, expected)
@@ -58,7 +58,7 @@ def test_a_path_term_keeps_the_whole_model_program():
     sig, torque = data.pair(np.asarray(rec.torque) * 0.5)
     assert design_by_terms(model, sig, torque) is None
     np.testing.assert_array_equal(
-        design(model, sig, torque), np.asarray(_design(model, sig, torque))
+        design(model, sig, torque), np.asarray(design_columns(model, sig, torque))
     )
 
 

@@ -3,13 +3,30 @@
 [`partial_out`][hdjax.discover._uncertainty.partial_out] makes an effect's columns and the
 twist orthogonal to the other columns by corrected semi-normal equations on one Gram matrix;
 the reference is the residual of `numpy.linalg.lstsq` (SVD) on the other columns, and the
-projection must leave nothing in their span.
+projection must leave nothing in their span. The design is read as one block (in memory) and
+in chunks of rows (a long log), which must agree.
 """
 
 import numpy as np
 import pytest
 
-from hdjax.discover._uncertainty import _gram, partial_out
+from hdjax.discover._uncertainty import partial_out, row_gram
+
+
+class _Rows:
+    """A design as a row source of `size`-row chunks (`size=None`: one block)."""
+
+    def __init__(self, a: np.ndarray, size: int | None = None):
+        self.a, self.size = a, size or a.shape[0]
+
+    def designs(self, model):
+        for lo in range(0, self.a.shape[0], self.size):
+            yield lo, min(lo + self.size, self.a.shape[0]), self.a[lo : lo + self.size]
+
+
+def _partial_out(a, y, others, cols, size=None):
+    rows = _Rows(a, size)
+    return partial_out(None, rows, y, others, cols, row_gram(None, rows, y))
 
 
 def _design(seed: int, n: int, poly_order: int, collinear: bool = False):
@@ -34,13 +51,14 @@ def _design(seed: int, n: int, poly_order: int, collinear: bool = False):
     return a, y
 
 
+@pytest.mark.parametrize("size", [None, 1999])
 @pytest.mark.parametrize("seed, poly_order, collinear", [(0, 3, 0), (1, 6, 0), (2, 6, 1)])
-def test_partial_out_equals_lstsq_residuals(seed, poly_order, collinear):
+def test_partial_out_equals_lstsq_residuals(seed, poly_order, collinear, size):
     a, y = _design(seed, 20_000, poly_order, collinear)
     p = a.shape[1]
     cols = np.array([p - 2, p - 1])
     others = np.arange(p - 2)
-    xp, yp = partial_out(a, y, others, cols, _gram(a, y))
+    xp, yp = _partial_out(a, y, others, cols, size)
     target = np.column_stack([a[:, cols], y])
     o = a[:, others]
     s = np.sqrt((o * o).sum(axis=0))
@@ -57,6 +75,6 @@ def test_partial_out_equals_lstsq_residuals(seed, poly_order, collinear):
 
 def test_partial_out_with_no_other_columns():
     a, y = _design(3, 500, 2)
-    xp, yp = partial_out(a, y, np.array([], int), np.array([1]), _gram(a, y))
+    xp, yp = _partial_out(a, y, np.array([], int), np.array([1]), 97)
     np.testing.assert_array_equal(xp[:, 0], a[:, 1])
     np.testing.assert_array_equal(yp, y)

@@ -19,7 +19,7 @@ from hdjax.compliance import (
     calibrate_lstsq,
     calibration_messages,
 )
-from hdjax.compliance._lstsq import _base_column_list, _compact_column_list, _term_columns
+from hdjax.compliance._lstsq import _base_column_list, compact_column_list, term_columns
 from hdjax.effects import TORQUE_PATH, Backlash
 from tests.helpers import JOINT, make_signals, numpy_design, sim_recording, simulate
 
@@ -188,10 +188,10 @@ def test_recording_without_torque_is_refused():
 def test_no_recompilation_on_second_call(exact_case):
     c = exact_case
     calibrate_lstsq(c.model, (c.sig, c.torque))
-    before = [f._cached._cache_size() for f in (_base_column_list, _term_columns)]
+    before = [f._cached._cache_size() for f in (_base_column_list, term_columns)]
     with warnings.catch_warnings():
         calibrate_lstsq(c.model, (c.sig, c.torque))
-    assert [f._cached._cache_size() for f in (_base_column_list, _term_columns)] == before
+    assert [f._cached._cache_size() for f in (_base_column_list, term_columns)] == before
 
 
 def test_compact_columns_equal_a_single_program_bit_for_bit():
@@ -218,7 +218,7 @@ def test_compact_columns_equal_a_single_program_bit_for_bit():
     sig = hdjax.compliance.signals_from_recording(rec, model.ratio, model.twist_sign)
     torque = jnp.asarray(rec.torque)
     sig = eqx.tree_at(lambda s: s.extras, sig, {**sig.extras, TORQUE_PATH: 0.9 * torque})
-    cols, seg = _compact_column_list(model, sig, torque)
+    cols, seg = compact_column_list(model, sig, torque)
     ref_cols, ref_seg = single(model, sig, torque)
     assert len(cols) == len(ref_cols) == model.n_segments + model.n_base + model.n_effect
     for got, ref in zip(cols, ref_cols):

@@ -5,9 +5,9 @@ from __future__ import annotations
 from .._errors import ConfigError
 from .._joint import Joint
 from ..compliance import ComplianceModel, calibrate_lstsq, estimate_torque
-from ..compliance._nested import nested_fit
+from ..compliance.internal import nested_fit
 from ..config import check_memory, synthetic_recording
-from ..pipelines._paper import PAPER_MS_PER_100, stacked_signals
+from ..pipelines.internal import PAPER_MS_PER_100, stacked_signals
 from ._common import Progress, add_command, add_quiet
 
 HELP = "time estimation and the polynomial-order sweep on this machine (prints JSON)"

@@ -176,7 +176,7 @@ def experiment_inputs(exp) -> list:
     [`hdjax.report.check_output_dir`][]."""
     from pathlib import Path
 
-    from ..config._load import resolve_path  # hdjax.config is heavy: imported on use
+    from ..config.internal import resolve_path
 
     paths = [exp.path] if getattr(exp, "path", None) is not None else []
 

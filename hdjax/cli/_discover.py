@@ -23,13 +23,18 @@ from .._formats import load_recording
 from .._io import read_toml
 from .._joint import load_joint
 from .._memory import check_read_memory
-from ..discover import _loop  # `_loop.discover` looked up at call time, where a test stops it
-from ..discover._checks import check_inputs
-from ..discover._chunked import check_chunk
-from ..discover._config import discover_options, load_discover_config
-from ..discover._experiment import experiment_toml
-from ..discover._options import DiscoverOptions
-from ..discover._report import write_report_into
+from ..discover import (
+    DiscoverOptions,
+    check_inputs,
+    internal as loop,  # `loop.discover` looked up at call time, where a test stops it
+)
+from ..discover.internal import (
+    check_chunk,
+    discover_options,
+    experiment_toml,
+    load_discover_config,
+    write_report_into,
+)
 from ..report import ResultDir
 from ._common import Parser
 
@@ -225,7 +230,7 @@ def _run_into(rd, args: argparse.Namespace) -> int:
     context_split = context is not None
     # one log cut into TRAIN and TEST: the loop sees it whole (not chunk by chunk)
     context = context if not options.chunk else None
-    result = _loop.discover(train, test, joint, options, progress=say, context=context)
+    result = loop.discover(train, test, joint, options, progress=say, context=context)
     result.aux.notes[:0] = cfg_notes + notes + [f"input warning: {w.message}" for w in caught]
     say("writing report" + ("" if args.no_figures else " and figures"))
     experiment, missing = _experiment(args, joint, context_split)

@@ -19,9 +19,9 @@ from ..config import (
     save_model,
     with_absolute_paths,
 )
-from ..config._preflight import check_angles
+from ..config.internal import check_angles
 from ..network import predict_torque as net_estimate
-from ..pipelines import _paper as P
+from ..pipelines import internal as P
 from ..report import (
     ResultDir,
     environment,

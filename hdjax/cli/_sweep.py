@@ -9,7 +9,7 @@ from pathlib import Path
 
 from .._errors import ConfigError, HdjaxError
 from ..compliance import estimate_torque_arrays
-from ..compliance._nested import batched_estimates, estimable, member_message, nested_fit
+from ..compliance.internal import batched_estimates, estimable, member_message, nested_fit
 from ..config import (
     Experiment,
     apply_setting,
@@ -21,12 +21,12 @@ from ..config import (
     preflight,
     with_absolute_paths,
 )
-from ..config._preflight import check_angles
-from ..pipelines import _paper as P
-from ..pipelines._streamed import StreamedEstimate
+from ..config.internal import check_angles
+from ..pipelines import internal as P
+from ..pipelines.internal import StreamedEstimate
 from ..reference import describe_column_reference
 from ..report import environment, find_knee, markdown_table, sweep_figure
-from ..report._figures import KNEE_RULE
+from ..report.internal import KNEE_RULE
 from ._common import (
     Progress,
     add_experiment_command,

@@ -160,7 +160,7 @@ def _piecewise(model: ComplianceModel, r, hs: list, g):
     return t, seg, n_valid > 1, ~any_valid
 
 
-def _split_effects(model: ComplianceModel):
+def effect_groups(model: ComplianceModel):
     """Effect groups by torque dependence, with their coefficient slices."""
     out = {"none": [], "linear": [], "memoryless": [], "path": []}
     i = model.n_coef - model.n_effect
@@ -174,7 +174,7 @@ def _split_effects(model: ComplianceModel):
 def _effect_parts(model: ComplianceModel, sig: Signals):
     """Eq. (26)'s twist minus the torque-free effect groups, and the torque gain of the groups
     linear in torque (`None` without any)."""
-    effects = _split_effects(model)
+    effects = effect_groups(model)
     r = sig.twist
     for term, c in effects["none"]:
         r = r - term.columns(sig, None) @ c
@@ -186,15 +186,15 @@ def _effect_parts(model: ComplianceModel, sig: Signals):
 
 def _estimate_impl(model: ComplianceModel, sig: Signals):
     r, g = _effect_parts(model, sig)
-    return _invert(model, sig, r, g)
+    return invert_twist(model, sig, r, g)
 
 
-def _invert(model: ComplianceModel, sig: Signals, r, g):
+def invert_twist(model: ComplianceModel, sig: Signals, r, g):
     """Eqs. (26)-(27) from the twist `r` less the torque-free effect groups and the linear
     groups' torque gain `g` ([`_effect_parts`][]); `model`'s torque-free and linear effect
     groups are not read again (the residual loop passes a model without them, so that one
     compiled inversion serves every structure that differs only in those groups)."""
-    effects = _split_effects(model)
+    effects = effect_groups(model)
     hs = _base_h(model, sig)
 
     def solve(r_eff):
@@ -314,7 +314,7 @@ def estimate_torque(
 
     Raises [`hdjax.InversionError`][] when the calibrated compliance is not increasing in torque.
     """
-    _check_estimable(model)
+    check_estimable(model)
     if isinstance(data, Recording):
         data = signals(data, model.joint, velocity=model.velocity, causal=causal)
     elif causal:
@@ -358,7 +358,7 @@ _SINGLE_CACHE: dict[int, tuple[ComplianceModel, object]] = {}
 _SINGLE_CACHE_SIZE = 8
 
 
-def _check_estimable(model: ComplianceModel) -> None:
+def check_estimable(model: ComplianceModel) -> None:
     msg = check_invertible(model)
     if msg:
         raise InversionError(msg)
@@ -374,7 +374,7 @@ def torque_estimator(model: ComplianceModel) -> Callable[[Float[Array, " 6"]], F
     (flags as 0/1). One packed output keeps the call from Python at a few microseconds.
     Models whose terms read extra columns (e.g. `temperature`) are not supported here.
     """
-    _check_estimable(model)
+    check_estimable(model)
     needs = {
         name
         for term in model.base_terms + model.effect_terms

@@ -80,7 +80,7 @@ def prepare(model: ComplianceModel, data) -> tuple[Signals, jax.Array]:
 
 
 @eqx.filter_jit
-def _design(model: ComplianceModel, sig: Signals, torque):
+def design_columns(model: ComplianceModel, sig: Signals, torque):
     return model.design(sig, torque)
 
 
@@ -115,7 +115,7 @@ def _base_column_list(terms: tuple, sig: Signals) -> list:
 
 
 @eqx.filter_jit
-def _term_columns(term, sig: Signals, torque) -> Float[jax.Array, "n k"]:
+def term_columns(term, sig: Signals, torque) -> Float[jax.Array, "n k"]:
     """One effect group's columns (one program per group)."""
     return term.columns(sig, torque)
 
@@ -129,11 +129,11 @@ def term_signals(sig: Signals) -> Signals:
     return eqx.tree_at(lambda s: s.extras, sig, extras)
 
 
-def _compact_column_list(model: ComplianceModel, sig: Signals, torque):
+def compact_column_list(model: ComplianceModel, sig: Signals, torque):
     """Hinge, base and effect columns as separate 1-D arrays, and each row's segment.
 
     The hinges and segments in NumPy (exact), the base terms in one compiled program and each
-    effect group in its own ([`_term_columns`][]): a structure made of groups already seen
+    effect group in its own ([`term_columns`][]): a structure made of groups already seen
     (the residual loop tries dozens) traces, lowers and loads nothing new, where a program per
     structure would. The numbers equal those of a single program, bit for bit (tested).
     """
@@ -144,9 +144,7 @@ def _compact_column_list(model: ComplianceModel, sig: Signals, torque):
         cols += [np.asarray(c) for c in _base_column_list(model.base_terms, plain)]
     torque = jnp.asarray(t)
     for term in model.effect_terms:
-        block = np.asarray(
-            _term_columns(term, sig if term.torque_kind == "path" else plain, torque)
-        )
+        block = np.asarray(term_columns(term, sig if term.torque_kind == "path" else plain, torque))
         cols += [block[:, j] for j in range(block.shape[1])]
     seg = np.zeros(t.shape, np.int32)
     for knot in model.knots:  # as `ComplianceModel.segment_index`: knots at or below
@@ -174,7 +172,7 @@ class _SegmentedDesign:
     """
 
     def __init__(self, model: ComplianceModel, sig: Signals, torque, rows=None):
-        cols, seg = _compact_column_list(model, sig, torque)
+        cols, seg = compact_column_list(model, sig, torque)
         x = np.stack([np.asarray(c) for c in cols])  # q x n, rows contiguous for BLAS
         twist, torque = np.asarray(sig.twist), np.asarray(torque)
         if rows is not None:
@@ -513,7 +511,7 @@ def rank_message(rank: int, p: int, collinear) -> str:
 def _qr_solve(model, sig, torque, active, throw, rows=None):
     """Scaled Householder QR on the dense design (of the rows `rows`, default all): rank,
     condition and (if full rank) solution."""
-    A, b = _design(model, sig, torque), sig.twist
+    A, b = design_columns(model, sig, torque), sig.twist
     if rows is not None:
         A, b = A[rows], b[rows]
     qtb, r, scale = _scaled_qr(A, b, jnp.asarray(active))

@@ -15,7 +15,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ..effects._dahl_carry import is_sequential
+from ..effects.internal import is_sequential
 from ._signals import signals_from_recording
 
 

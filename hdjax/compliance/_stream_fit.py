@@ -31,7 +31,7 @@ from .._formats import iter_recordings
 from .._io import ColumnMap
 from .._recording import Recording
 from .._solution import Solution
-from ..effects._dahl_carry import DahlCarry, is_sequential
+from ..effects.internal import DahlCarry, is_sequential
 from ._lstsq import (
     CSNE_MAX_COND,
     _compact_index,
@@ -128,7 +128,7 @@ def peak_abs(stream: RecordingStream, column: str = "current") -> float:
 # Windows: a chunk with its halo, as one recording
 
 
-def _arrays(rec: Recording, need_torque: bool = True) -> dict[str, np.ndarray]:
+def recording_arrays(rec: Recording, need_torque: bool = True) -> dict[str, np.ndarray]:
     out = {k: np.asarray(getattr(rec, k)) for k in ("t", "theta_m", "theta_l", "current")}
     if rec.torque is None:
         if need_torque:
@@ -142,7 +142,7 @@ def _arrays(rec: Recording, need_torque: bool = True) -> dict[str, np.ndarray]:
     return out
 
 
-def _recording(cols: dict[str, np.ndarray], source: str) -> Recording:
+def recording_from_arrays(cols: dict[str, np.ndarray], source: str) -> Recording:
     j = lambda k: jnp.asarray(cols[k])
     return Recording(
         t=j("t"),
@@ -183,11 +183,11 @@ def windows(
     for chunks in stream:
         it = iter(chunks)
         cur_rec = next(it, None)
-        cur = None if cur_rec is None else _arrays(cur_rec, need_torque)
+        cur = None if cur_rec is None else recording_arrays(cur_rec, need_torque)
         prev = None
         while cur is not None:
             nxt_rec = next(it, None)
-            nxt = None if nxt_rec is None else _arrays(nxt_rec, need_torque)
+            nxt = None if nxt_rec is None else recording_arrays(nxt_rec, need_torque)
             parts, lo = [], 0
             if prev is not None and before:
                 parts.append({k: v[-before:] for k, v in prev.items()})
@@ -199,7 +199,7 @@ def windows(
             hi = lo + cur["t"].shape[0]
             if pad_to is not None:
                 win = _pad(win, pad_to)
-            yield _recording(win, cur_rec.source), lo, hi
+            yield recording_from_arrays(win, cur_rec.source), lo, hi
             prev, cur, cur_rec = cur, nxt, nxt_rec
 
 
@@ -339,7 +339,7 @@ def calibrate_chunks(
     """[`calibrate_stream`][] from design chunks (Song et al. eqs. (15)-(17)).
 
     `passes()` starts a pass over the data: an iterator of `(x, b, torque, seg)` per chunk,
-    `x` the compact columns (`q x rows`, as `_compact_column_list` orders them), `b` the twist,
+    `x` the compact columns (`q x rows`, as `compact_column_list` orders them), `b` the twist,
     `torque` the reference torque and `seg` each row's torque segment. The refinement pass
     runs above the scaled condition number `refine_above` (0: always, as
     [`hdjax.compliance.calibrate_lstsq`][] does); `monotone` as there (the shape constraint's

@@ -18,7 +18,7 @@ from .._errors import ConfigError, check_keys, did_you_mean
 from .._io import check_encoding
 from .._joint import Joint
 from ..compliance import ComplianceModel
-from ..reference._spec import check_reference
+from ..reference import check_reference
 
 Check = Callable[[str, object], object]
 

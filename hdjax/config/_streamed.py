@@ -25,7 +25,7 @@ from .._errors import ConfigError, DataError
 from .._formats import iter_recordings
 from .._joint import Joint
 from ..compliance import RecordingStream
-from ..compliance._stream_fit import _arrays, _recording
+from ..compliance.internal import recording_arrays, recording_from_arrays
 from ._load import column_map, resolve_path
 from ._saved_model import ratio_mismatch
 
@@ -128,7 +128,8 @@ def streams(exp) -> bool:
 
 
 def _columns(rec) -> dict[str, np.ndarray]:
-    return _arrays(rec)  # t, angles, current, torque, x:extras (a missing torque: one line)
+    # t, angles, current, torque, x:extras (a missing torque: one line)
+    return recording_arrays(rec)
 
 
 def _regroup(tables, chunk: int):
@@ -173,7 +174,7 @@ def _part_tables(path, cmap, chunk, check_units, keep, settle: float):
 def _part_stream(path, cmap, chunk, check_units, keep, settle, label) -> RecordingStream:
     def chunks():
         for cols in _regroup(_part_tables(path, cmap, chunk, check_units, keep, settle), chunk):
-            yield _recording(cols, str(path))
+            yield recording_from_arrays(cols, str(path))
 
     return RecordingStream(lambda: iter([chunks()]), label)
 

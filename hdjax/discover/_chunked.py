@@ -28,10 +28,8 @@ from .._custom_types import Float
 from .._errors import ConfigError
 from .._features import Signals
 from ..compliance import ComplianceModel
-from ..compliance._lstsq import _compact_column_list, _design
-from ..compliance._stream_fit import MIN_CHUNK
-from ..effects._dahl_carry import DahlCarry as DahlCarry, is_sequential as sequential
-from ..effects._skew import BACK_SAMPLES
+from ..compliance.internal import MIN_CHUNK, compact_column_list, design_columns
+from ..effects.internal import BACK_SAMPLES, DahlCarry, is_sequential as sequential
 
 
 def check_chunk(chunk, where: str = "discover chunk") -> int:
@@ -115,7 +113,7 @@ def _sequential_positions(model: ComplianceModel, first: int) -> list[tuple[int,
 
 
 def _compiled_design(model: ComplianceModel, sig: Signals, torque) -> np.ndarray:
-    return np.asarray(_design(model, sig, torque))
+    return np.asarray(design_columns(model, sig, torque))
 
 
 class Chunks:
@@ -179,7 +177,7 @@ class Chunks:
         def passes():
             carry = DahlCarry()
             for lo, hi, sc, tc, h in self.signals():
-                cols, seg = _compact_column_list(model, sc, tc)
+                cols, seg = compact_column_list(model, sc, tc)
                 rows = hi - lo
                 x = np.stack([np.asarray(c)[h : h + rows] for c in cols])
                 for col, term in seq:

@@ -31,10 +31,8 @@ import numpy as np
 import scipy.linalg
 
 from .._custom_types import Bool, Float, Int
-from ..compliance import ComplianceModel, StreamingQR
-from ..compliance._lstsq import CSNE_MAX_COND
-from ..compliance._shape import ShapeConstraint, ShapeData, solve_on
-from ..compliance._stream import scaled_cho_factor
+from ..compliance import ComplianceModel, ShapeConstraint, ShapeData, StreamingQR
+from ..compliance.internal import CSNE_MAX_COND, scaled_cho_factor, solve_on
 
 Rows = Callable[[], Iterable[tuple[int, int, np.ndarray]]]
 """A row source: each call starts a pass, `(lo, hi, A)` with `A` the full design's rows

@@ -82,73 +82,28 @@ def block_statistics_batched(a, batches, y, blocks, *, chunk: int = CHUNK) -> Bl
     only one batch's columns need be in memory. The groups are numbered in arrival order; the
     statistics equal those of all groups at once (each group's are its own: the base's
     projection and the per-block products of its columns).
+
+    The rows in memory are read as [`block_statistics_streamed`][] reads a log: in passes of
+    whole blocks, at most `chunk` rows at a time (at least one block).
     """
     a = np.asarray(a, np.float64)
-    y = np.asarray(y, np.float64)
-    blocks = np.asarray(blocks)
-    bounds = _block_bounds(blocks)
-    n_blocks = bounds.size - 1
-    p = a.shape[1]
-    chunks = []
-    b = 0
-    while b < n_blocks:
-        # whole blocks, at most `chunk` rows (at least one block)
+    bounds = _block_bounds(np.asarray(blocks))
+    spans, b = [], 0
+    while b < bounds.size - 1:
         e = b + 1
-        while e < n_blocks and bounds[e + 1] - bounds[b] <= chunk:
+        while e < bounds.size - 1 and bounds[e + 1] - bounds[b] <= chunk:
             e += 1
-        chunks.append((b, e))
+        spans.append((int(bounds[b]), int(bounds[e])))
         b = e
 
-    # Pre-pass: A^T A and A^T y, to make y and the candidates (nearly) orthogonal to the base
-    # design before the statistics are summed. A refit on [A | C] equals one on [A | C - A W]
-    # for any W (the same column space), so the scores are unchanged, but a candidate close to
-    # the base's span no longer loses its digits to the cancellation in
-    # C^T C - C^T A (A^T A)^{-1} A^T C.
-    if p:
-        aa = np.zeros((p, p))
-        ay = np.zeros(p)
-        for b, e in chunks:
-            ac = a[bounds[b] : bounds[e]]
-            aa += ac.T @ ac
-            ay += ac.T @ y[bounds[b] : bounds[e]]
-        d = np.sqrt(np.diag(aa))
-        d[d == 0] = 1.0
-        aa_scaled = aa / np.outer(d, d)
+    def rows_of(groups):
+        def passes():
+            for lo, hi in spans:
+                yield lo, hi, a[lo:hi], [g[lo:hi] for g in groups]
 
-        def project(ar):
-            return np.linalg.lstsq(aa_scaled, ar / d[:, None], rcond=1e-13)[0] / d[:, None]
+        return passes
 
-        yt = y - a @ project(ay[:, None])[:, 0]
-    else:
-        yt = y.copy()
-    # the base's own products, [A | y]^T [A | y] per block
-    base = np.zeros((n_blocks, p + 1, p + 1))
-    for j in range(n_blocks):
-        rows = slice(bounds[j], bounds[j + 1])
-        ab_ = a[rows]
-        yb = yt[rows]
-        base[j, :p, :p] = ab_.T @ ab_
-        base[j, :p, p] = base[j, p, :p] = ab_.T @ yb
-        base[j, p, p] = yb @ yb
-    parts, widths = [base], []
-    cc_parts: dict[int, list] = {}
-    for batch in batches:
-        part, cc_b = _batch_statistics(a, yt, list(batch), bounds, chunks, project if p else None)
-        if part is None:
-            continue
-        parts.append(part)
-        for g in batch:
-            w = int(g.shape[1])
-            widths.append(w)
-        for w, v in cc_b.items():
-            cc_parts.setdefault(w, []).append(v)
-    widths = tuple(widths)
-    by_width, cols = _by_width(widths)
-    cc = {w: np.concatenate(cc_parts[w], axis=1) for w in by_width}
-    ab = np.concatenate(parts, axis=2)
-    return BlockStatistics(
-        ab, cc, {w: np.asarray(idx) for w, idx in by_width.items()}, cols, p, len(widths), widths
-    )
+    return _statistics((rows_of(list(g)) for g in _at_least_one(batches)), y, blocks, None)
 
 
 def block_statistics_streamed(passes, y, blocks, select) -> BlockStatistics:
@@ -161,64 +116,114 @@ def block_statistics_streamed(passes, y, blocks, select) -> BlockStatistics:
     accumulated over the chunks it spans). Two passes: the first sums $A^\top A$, $A^\top y$
     and $A^\top C$; then `select()` gives the indices of the groups to keep (what the first
     pass found usable), and the second sums the per-block statistics of `y` and the kept
-    groups made orthogonal to the base, as [`block_statistics_batched`][] does. `y` is the
-    target over the whole record.
+    groups made orthogonal to the base. `y` is the target over the whole record.
     """
+    return _statistics([passes], y, blocks, select)
+
+
+def _at_least_one(batches):
+    """The batches, or one empty batch where there are none (the base's statistics remain)."""
+    empty = True
+    for batch in batches:
+        empty = False
+        yield batch
+    if empty:
+        yield []
+
+
+def _statistics(batch_passes, y, blocks, select) -> BlockStatistics:
+    """The statistics, one batch of groups at a time: `batch_passes` yields, per batch, a
+    `passes()` over the rows with that batch's groups (see [`block_statistics_streamed`][]).
+    The base's sums ($A^\top A$, $A^\top y$ and the blocks' `[A | y]` products) are taken on
+    the first batch's passes only; each batch then costs its own $A^\top C$ pass and one
+    pass of per-block sums, its columns made orthogonal to the base first (a refit on
+    `[A | C]` equals one on `[A | C - A W]`, so the scores are unchanged, but a candidate close
+    to the base's span no longer loses its digits to the cancellation in
+    $C^\top C - C^\top A (A^\top A)^{-1} A^\top C$)."""
     y = np.asarray(y, np.float64)
     bounds = _block_bounds(np.asarray(blocks))
-    n_blocks = bounds.size - 1
-    aa = ay = ac = None
-    widths_all: list[int] = []
-    for lo, hi, a, groups in passes():
-        if aa is None:
-            p = a.shape[1]
-            widths_all = [int(g.shape[1]) for g in groups]
-            aa, ay = np.zeros((p, p)), np.zeros(p)
-            ac = np.zeros((p, sum(widths_all)))
-        aa += a.T @ a
-        ay += a.T @ y[lo:hi]
-        if groups:
-            ac += a.T @ np.concatenate(groups, axis=1)
-    keep = [int(i) for i in select()]
-    offsets = np.cumsum([0, *widths_all])
-    keep_cols = np.concatenate([np.arange(offsets[i], offsets[i + 1]) for i in keep] or [[]])
-    keep_cols = keep_cols.astype(int)
-    if p:
-        d = np.sqrt(np.diag(aa))
-        d[d == 0] = 1.0
-        aa_scaled = aa / np.outer(d, d)
-        rhs = np.column_stack([ay, ac[:, keep_cols]])
-        proj = np.linalg.lstsq(aa_scaled, rhs / d[:, None], rcond=1e-13)[0] / d[:, None]
-        wy, wc = proj[:, 0], proj[:, 1:]
-    else:
-        wy, wc = np.zeros(0), np.zeros((0, keep_cols.size))
-    widths = tuple(widths_all[i] for i in keep)
+    base = project = wy = None
+    parts, cc_parts, widths = [], {}, []
+    for passes in batch_passes:
+        aa = ay = ac = None
+        batch_widths: list[int] = []
+        for lo, hi, a, groups in passes():
+            if ac is None:
+                p = a.shape[1]
+                batch_widths = [int(g.shape[1]) for g in groups]
+                ac = np.zeros((p, sum(batch_widths)))
+                aa, ay = np.zeros((p, p)), np.zeros(p)
+            if project is None:
+                aa += a.T @ a
+                ay += a.T @ y[lo:hi]
+            if groups:
+                ac += a.T @ np.concatenate(groups, axis=1)
+        if ac is None:
+            raise ValueError("the passes hold no rows")
+        if project is None:
+            project = _projector(aa)
+            wy = project(ay[:, None])[:, 0]
+        keep = list(range(len(batch_widths))) if select is None else [int(i) for i in select()]
+        offsets = np.cumsum([0, *batch_widths])
+        keep_cols = [np.arange(offsets[i], offsets[i + 1]) for i in keep]
+        wc = project(ac[:, np.concatenate([np.zeros(0, int), *keep_cols])])
+        kept = tuple(batch_widths[i] for i in keep)
+        part, cc_b, base_b = _block_sums(passes, y, bounds, wy, wc, keep, kept, base is None)
+        base = base_b if base is None else base
+        parts.append(part)
+        widths.extend(kept)
+        for w, v in cc_b.items():
+            cc_parts.setdefault(w, []).append(v)
+    widths = tuple(widths)
     by_width, cols = _by_width(widths)
-    c_total = int(keep_cols.size)
-    ab = np.zeros((n_blocks, p + 1, p + 1 + c_total))
+    cc = {w: np.concatenate(cc_parts[w], axis=1) for w in by_width}
+    ab = np.concatenate([base, *parts], axis=2)
+    groups = {w: np.asarray(idx) for w, idx in by_width.items()}
+    return BlockStatistics(ab, cc, groups, cols, wy.size, len(widths), widths)
+
+
+def _projector(aa: np.ndarray):
+    """`A^T R -> W`, the least-squares coefficients of columns `R` on the base (Jacobi-scaled
+    normal equations, minimum norm where the base is rank-deficient)."""
+    if not aa.size:
+        return lambda ar: np.zeros((0, ar.shape[1]))
+    d = np.sqrt(np.diag(aa)).copy()
+    d[d == 0] = 1.0
+    aa_scaled = aa / np.outer(d, d)
+    return lambda ar: np.linalg.lstsq(aa_scaled, ar / d[:, None], rcond=1e-13)[0] / d[:, None]
+
+
+def _block_sums(passes, y, bounds, wy, wc, keep, widths, with_base):
+    """One pass of per-block sums: `[A | y]^T C` and each kept group's own `C_i^T C_i`, with
+    `y - A wy` and `C - A wc` (orthogonal to the base), and `[A | y]^T [A | y]` where
+    `with_base`. **Returns:** `(ab part (n_blocks, p + 1, c), {w: (n_blocks, g_w, w, w)},
+    base (n_blocks, p + 1, p + 1) or None)`."""
+    n_blocks = bounds.size - 1
+    p = wy.size
+    by_width, cols = _by_width(widths)
+    ab = np.zeros((n_blocks, p + 1, wc.shape[1]))
     cc = {w: np.zeros((n_blocks, len(idx), w, w)) for w, idx in by_width.items()}
+    base = np.zeros((n_blocks, p + 1, p + 1)) if with_base else None
     for lo, hi, a, groups in passes():
         yt = y[lo:hi] - a @ wy
         m = np.concatenate([groups[i] for i in keep], axis=1) if keep else np.zeros((hi - lo, 0))
         m = m - a @ wc
-        b0 = int(np.searchsorted(bounds, lo, side="right")) - 1
-        j = b0
+        j = int(np.searchsorted(bounds, lo, side="right")) - 1
         while j < n_blocks and bounds[j] < hi:
             r = slice(max(bounds[j], lo) - lo, min(bounds[j + 1], hi) - lo)
             ar, yr, cr = a[r], yt[r], m[r]
-            ab[j, :p, :p] += ar.T @ ar
-            ab[j, :p, p] += ar.T @ yr
-            ab[j, p, :p] += ar.T @ yr
-            ab[j, p, p] += yr @ yr
-            ab[j, :p, p + 1 :] += ar.T @ cr
-            ab[j, p, p + 1 :] += yr @ cr
+            if with_base:
+                base[j, :p, :p] += ar.T @ ar
+                base[j, :p, p] += ar.T @ yr
+                base[j, p, :p] += ar.T @ yr
+                base[j, p, p] += yr @ yr
+            ab[j, :p] += ar.T @ cr
+            ab[j, p] += yr @ cr
             for w, ci in cols.items():
-                x = cr[:, ci]
+                x = cr[:, ci]  # (rows, g_w, w)
                 cc[w][j] += np.einsum("nga,ngb->gab", x, x)
             j += 1
-    return BlockStatistics(
-        ab, cc, {w: np.asarray(idx) for w, idx in by_width.items()}, cols, p, len(widths), widths
-    )
+    return ab, cc, base
 
 
 def _by_width(widths) -> tuple[dict[int, list[int]], dict[int, np.ndarray]]:
@@ -234,50 +239,6 @@ def _by_width(widths) -> tuple[dict[int, list[int]], dict[int, np.ndarray]]:
         for w, idx in by_width.items()
     }
     return by_width, cols
-
-
-def _batch_statistics(a, yt, groups, bounds, chunks, project):
-    """`[A | y]^T C` per block and each group's own `C_i^T C_i` per block, for one batch of
-    groups, the columns made orthogonal to the base first (`project`: `A^T C -> W`).
-    **Returns:** `(ab part (n_blocks, p + 1, c), {w: (n_blocks, g_w, w, w)})`, or `(None, {})`
-    for an empty batch."""
-    if not groups:
-        return None, {}
-    n_blocks = bounds.size - 1
-    p = a.shape[1]
-    widths = [int(g.shape[1]) for g in groups]
-    offsets = np.cumsum([0] + widths)
-    c_total = int(offsets[-1])
-    by_width, cols = _by_width(widths)
-
-    def stacked(lo, hi):
-        m = np.empty((hi - lo, c_total))
-        for i, g in enumerate(groups):
-            m[:, offsets[i] : offsets[i + 1]] = g[lo:hi]
-        return m
-
-    proj = None
-    if project is not None:
-        ar = np.empty((p, c_total))
-        for i, g in enumerate(groups):
-            ar[:, offsets[i] : offsets[i + 1]] = a.T @ g
-        proj = project(ar)
-    ab = np.zeros((n_blocks, p + 1, c_total))
-    cc = {w: np.zeros((n_blocks, len(idx), w, w)) for w, idx in by_width.items()}
-    for b, e in chunks:
-        lo, hi = bounds[b], bounds[e]
-        m = stacked(lo, hi)
-        if proj is not None:
-            m -= a[lo:hi] @ proj
-        for j in range(b, e):
-            rows = slice(bounds[j] - lo, bounds[j + 1] - lo)
-            cb = m[rows]
-            ab[j, :p] = a[bounds[j] : bounds[j + 1]].T @ cb
-            ab[j, p] = yt[bounds[j] : bounds[j + 1]] @ cb
-            for w, ci in cols.items():
-                x = cb[:, ci]  # (rows, g_w, w)
-                cc[w][j] = np.einsum("nga,ngb->gab", x, x)
-    return ab, cc
 
 
 def gram_solve(g: np.ndarray, rhs: np.ndarray) -> np.ndarray:

@@ -27,12 +27,23 @@ import numpy as np
 from .._custom_types import Array, ArrayLike, Bool, Float, Int, Shaped
 from .._errors import DataError, InversionError
 from .._recording import Recording
-from ..compliance import ComplianceModel, Signals, calibrate_lstsq, signals_from_recording
-from ..compliance._inversion import _invert, _split_effects
-from ..compliance._lstsq import _design, _term_columns, term_signals
-from ..compliance._model import base_term_columns
-from ..compliance._shape import ShapeConstraint, ShapeData
-from ..compliance._stream_fit import calibrate_chunks
+from ..compliance import (
+    ComplianceModel,
+    ShapeConstraint,
+    ShapeData,
+    Signals,
+    calibrate_lstsq,
+    signals_from_recording,
+)
+from ..compliance.internal import (
+    base_term_columns,
+    calibrate_chunks,
+    design_columns,
+    effect_groups,
+    invert_twist,
+    term_columns,
+    term_signals,
+)
 from ..effects import SEGMENT_START, TORQUE_PATH
 from ._chunked import Chunks
 from ._fold_solver import FoldSolver, one_block
@@ -266,7 +277,7 @@ def design_by_terms(model: ComplianceModel, sig: Signals, torque) -> np.ndarray 
             out[:, i : i + nb] = base
             i += nb
     for term in model.effect_terms:
-        c = np.asarray(_term_columns(term, sig, torque))
+        c = np.asarray(term_columns(term, sig, torque))
         out[:, i : i + c.shape[1]] = c
         i += c.shape[1]
     return out
@@ -278,7 +289,7 @@ def design(model: ComplianceModel, sig, torque) -> np.ndarray:
     a = design_by_terms(model, sig, torque)
     if a is not None:
         return a
-    return np.asarray(_design(canonical(model), sig, jnp.asarray(torque)))
+    return np.asarray(design_columns(canonical(model), sig, jnp.asarray(torque)))
 
 
 def chunks_of(sig: Signals, torque, chunk: int) -> Chunks:
@@ -305,13 +316,13 @@ def _gain_sum(g, gi) -> Float[Array, " n"]:
 @eqx.filter_jit
 def _invert_rest(core: ComplianceModel, sig: Signals, r, g):
     # linear groups left in `core` (beside a memoryless one) add their gain inside this program
-    for term, c in _split_effects(core)["linear"]:
+    for term, c in effect_groups(core)["linear"]:
         g = term.torque_gain(sig, c) if g is None else g + term.torque_gain(sig, c)
-    return _invert(core, sig, r, g)
+    return invert_twist(core, sig, r, g)
 
 
 def _inversion_core(model: ComplianceModel) -> tuple[ComplianceModel, list, list]:
-    """`model` without its torque-free and linear effect groups (what [`_invert`][] reads
+    """`model` without its torque-free and linear effect groups (what [`invert_twist`][] reads
     again), and those groups with their coefficients. Beside a memoryless group the linear
     groups stay in the model: their gain meets the Newton steps' products inside one program,
     where XLA may fuse them into other roundings than when it arrives as an input."""

@@ -11,7 +11,7 @@ from .._joint import Joint
 from .._metrics import ErrorMetrics
 from .._recording import Recording
 from ..compliance import ComplianceModel
-from ..compliance._lstsq import CalibrationData, prepare
+from ..compliance.internal import CalibrationData, prepare
 from ..effects import AbstractTerm
 from ._loop import _test_errors
 from ._options import DiscoverOptions

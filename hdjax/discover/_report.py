@@ -14,7 +14,7 @@ from .._features import find_gaps
 from .._joint import Joint
 from .._plotting import fixed_margins, pyplot
 from .._solution import Solution
-from ..compliance._lstsq import CalibrationData
+from ..compliance.internal import CalibrationData
 from ..config import save_model
 from ..report import ResultDir
 from ._loop import ARCSEC

@@ -15,8 +15,8 @@ from .._joint import Joint
 from .._recording import Recording
 from .._solution import Solution
 from ..compliance import ComplianceModel, merge_sparse_segments
-from ..compliance._lstsq import failure_message
-from ..config._schema import STRUCTURE_KEYS, paper_model
+from ..compliance.internal import failure_message
+from ..config.internal import STRUCTURE_KEYS, paper_model
 from ._options import DiscoverOptions
 from ._pipeline import (
     PipelineData,

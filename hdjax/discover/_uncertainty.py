@@ -54,6 +54,9 @@ Wiley 1987; H. Theil, "Repeated least squares applied to complete equation syste
 
 from __future__ import annotations
 
+import typing
+from collections.abc import Iterator
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -61,8 +64,7 @@ import scipy.linalg
 
 from .._features import Signals
 from ..compliance import ComplianceModel
-from ..compliance._lstsq import CSNE_MAX_COND
-from ..compliance._stream import scaled_cho_factor
+from ..compliance.internal import CSNE_MAX_COND, scaled_cho_factor
 from ._chunked import Chunks
 from ._folds import MAX_BLOCKS, correlation_length
 from ._pipeline import PipelineData, canonical, structure_shape
@@ -186,8 +188,12 @@ class _FitRows:
             yield lo, hi, f
 
 
-RowSource = Chunks | _ArrayRows | _FitRows
-"""Where design rows come from, chunk by chunk: `designs(model)` yields `(lo, hi, rows)`."""
+@typing.runtime_checkable
+class RowSource(typing.Protocol):
+    """Where design rows come from, chunk by chunk: `designs(model)` yields `(lo, hi, rows)`
+    (`Chunks` for a log, one chunk for a design in memory, or the two-stage fits of either)."""
+
+    def designs(self, model) -> Iterator[tuple[int, int, np.ndarray]]: ...
 
 
 def _csne(gram_cc: np.ndarray, rhs: np.ndarray, residual_pass) -> np.ndarray:
@@ -253,7 +259,7 @@ def effect_intervals(
     are two-stage least-squares estimates, which neither the torque sensor's noise nor the load
     encoder's in the link speed biases), `chunks` (instead of `design`: the record
     with the same driver, whose design rows are formed chunk by chunk for the Gram matrix and
-    the projections, [`partial_out_chunked`][]).
+    the projections, [`partial_out`][]).
 
     **Returns:** per effect, a dict with `effect`, `arcsec`, `arcsec_ci95`, `nm`, `nm_ci95`,
     `block_samples`.
@@ -278,11 +284,7 @@ def effect_intervals(
     else:
         inst = _ArrayRows(instruments) if chunks is None else instruments
         fit = _two_stage(model, rows, inst, cols)
-    if chunks is None:
-        fit_a = next(iter(fit.designs(model)))[2]
-        gram = _gram(fit_a, y)
-    else:
-        gram = _gram_chunked(model, fit, y)
+    gram = row_gram(model, fit, y)
     p = model.n_coef
 
     def residual_pass(w):
@@ -316,10 +318,7 @@ def effect_intervals(
         i += m
         others = np.flatnonzero(active & ~np.isin(np.arange(model.n_coef), sl))
         x = x_all[:, sl - eff[0]]
-        if chunks is None:
-            xp, _ = partial_out(fit_a, y, others, sl, gram)
-        else:
-            _, xp, _ = partial_out_chunked(model, fit, y, others, sl, gram)
+        xp, _ = partial_out(model, fit, y, others, sl, gram)
         row = _bootstrapped(term, coef[sl], xp, x, resid, comp, schemes)
         row |= dict(block_samples=length, nm_block_samples=length_nm)
         out.append(row)
@@ -408,67 +407,28 @@ def _gram(design: np.ndarray, y: np.ndarray) -> np.ndarray:
     return g
 
 
-def partial_out(
-    design: np.ndarray, y: np.ndarray, others: np.ndarray, cols: np.ndarray, gram: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """The columns `cols` of `design` and the target `y`, each made orthogonal to the columns
-    `others` (the residuals of their least-squares fits on them, Frisch-Waugh-Lovell).
-
-    `gram` is the Gram matrix of `[design | y]`. The fits are the corrected semi-normal
-    equations on the Jacobi-scaled Gram block of `others` (one refinement step with the true
-    residual), or, above `CSNE_MAX_COND` or when Cholesky fails, a QR of those columns.
-    **Returns:** `(x_perp, y_perp)`, shapes `(n, len(cols))` and `(n,)`.
-    """
-    p = design.shape[1]
-    target = np.concatenate([design[:, cols], y[:, None]], axis=1)
-    if others.size == 0:
-        return target[:, :-1], target[:, -1]
-    d = np.sqrt(np.diag(gram)[others])
-    d[d == 0] = 1.0
-    gs = gram[np.ix_(others, others)] / np.outer(d, d)
-    chol = scaled_cho_factor(gs, CSNE_MAX_COND)
-    if chol is None:
-        q, _ = np.linalg.qr(design[:, others] / d)
-        t = target - q @ (q.T @ target)
-        return t[:, :-1], t[:, -1]
-    factor = chol[0]
-    # coefficients on all columns, zero off `others`, so no copy of those columns is made
-    w = np.zeros((p, target.shape[1]))
-    w[others] = (
-        scipy.linalg.cho_solve(
-            factor, gram[np.ix_(others, np.r_[cols, p])] / d[:, None], check_finite=False
-        )
-        / d[:, None]
-    )
-    r = target - design @ w
-    # one refinement step with the true residual removes the squared condition number
-    w[others] += (
-        scipy.linalg.cho_solve(factor, (design.T @ r)[others] / d[:, None], check_finite=False)
-        / d[:, None]
-    )
-    t = target - design @ w
-    return t[:, :-1], t[:, -1]
-
-
-def _gram_chunked(model, chunks: RowSource, y: np.ndarray) -> np.ndarray:
-    """[`_gram`][] summed over the design's chunks."""
+def row_gram(model, rows: RowSource, y: np.ndarray) -> np.ndarray:
+    """[`_gram`][] summed over the design's chunks (one for a design in memory)."""
     g = None
-    for lo, hi, a in chunks.designs(model):
+    for lo, hi, a in rows.designs(model):
         part = _gram(a, y[lo:hi])
         g = part if g is None else g + part
     return g
 
 
-def partial_out_chunked(model, chunks: RowSource, y, others, cols, gram):
-    """[`partial_out`][] with the design formed chunk by chunk: the same corrected
-    semi-normal equations (the refinement's $A^\top r$ summed over a pass), or above
-    `CSNE_MAX_COND` the QR of those columns folded in chunk by chunk (TSQR).
+def partial_out(model, chunks: RowSource, y, others, cols, gram):
+    """The columns `cols` of the design and the target `y`, each made orthogonal to the
+    columns `others` (the residuals of their least-squares fits on them, Frisch-Waugh-Lovell),
+    the design's rows read from `chunks` (one chunk for a design in memory).
 
-    **Returns:** `(x, x_perp, y_perp)`: the columns `cols` themselves, `(n, len(cols))`, and
-    as [`partial_out`][] returns them.
+    `gram` is the Gram matrix of `[design | y]` ([`row_gram`][]). The fits are the corrected
+    semi-normal equations on the Jacobi-scaled Gram block of `others` (one refinement step
+    with the true residual, its $A^\top r$ summed over a pass), or, above `CSNE_MAX_COND` or
+    when Cholesky fails, the QR of those columns folded in chunk by chunk (TSQR).
+
+    **Returns:** `(x_perp, y_perp)`, shapes `(n, len(cols))` and `(n,)`.
     """
     n, m = y.size, len(cols)
-    x = np.empty((n, m))
     t = np.empty((n, m + 1))
 
     def target(lo, hi, a):
@@ -476,9 +436,8 @@ def partial_out_chunked(model, chunks: RowSource, y, others, cols, gram):
 
     if others.size == 0:
         for lo, hi, a in chunks.designs(model):
-            x[lo:hi] = a[:, cols]
             t[lo:hi] = target(lo, hi, a)
-        return x, t[:, :-1], t[:, -1]
+        return t[:, :-1], t[:, -1]
     p = gram.shape[0] - 1
     d = np.sqrt(np.diag(gram)[others])
     d[d == 0] = 1.0
@@ -492,11 +451,19 @@ def partial_out_chunked(model, chunks: RowSource, y, others, cols, gram):
             r = np.linalg.qr(np.vstack([r, block]), mode="r")
         r_full = np.zeros((k + m + 1, k + m + 1))
         r_full[: r.shape[0]] = r
-        w_o = scipy.linalg.lstsq(r_full[:k, :k], r_full[:k, k:])[0] / d[:, None]
+        r11 = r_full[:k, :k]
+        z = scipy.linalg.lstsq(r11, r_full[:k, k:])[0]
+        # one refinement step with the true residual (seminormal equations on R), as the
+        # Cholesky branch takes: the chunks' R is as accurate as one QR's, its solve is not
+        atr = np.zeros((k, m + 1))
         for lo, hi, a in chunks.designs(model):
-            x[lo:hi] = a[:, cols]
+            ao = a[:, others] / d
+            atr += ao.T @ (target(lo, hi, a) - ao @ z)
+        z += scipy.linalg.lstsq(r11, scipy.linalg.lstsq(r11.T, atr)[0])[0]
+        w_o = z / d[:, None]
+        for lo, hi, a in chunks.designs(model):
             t[lo:hi] = target(lo, hi, a) - a[:, others] @ w_o
-        return x, t[:, :-1], t[:, -1]
+        return t[:, :-1], t[:, -1]
     factor = chol[0]
     w = np.zeros((p, m + 1))
     w[others] = (
@@ -512,6 +479,5 @@ def partial_out_chunked(model, chunks: RowSource, y, others, cols, gram):
         scipy.linalg.cho_solve(factor, atr[others] / d[:, None], check_finite=False) / d[:, None]
     )
     for lo, hi, a in chunks.designs(model):
-        x[lo:hi] = a[:, cols]
         t[lo:hi] = target(lo, hi, a) - a @ w
-    return x, t[:, :-1], t[:, -1]
+    return t[:, :-1], t[:, -1]

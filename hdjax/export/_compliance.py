@@ -25,12 +25,12 @@ import numpy as np
 
 from .._errors import ExportError
 from ..compliance import ComplianceModel
-from ..compliance._inversion import (
+from ..compliance.internal import (
     EDGE_TOLERANCE,
     MIN_PATH_SLOPE,
     NEWTON_STEPS,
-    _check_estimable,
     calibrated_segments,
+    check_estimable,
 )
 from ._assemble import CCode, StepParts, assemble
 from ._causal import check_terms, velocity_notes
@@ -333,7 +333,7 @@ def compliance_c(
     """
     if not isinstance(model, ComplianceModel):
         raise ExportError(f"compliance_c exports a ComplianceModel, got {type(model).__name__}")
-    _check_estimable(model)
+    check_estimable(model)
     check_terms(model.base_terms + model.effect_terms)
     notes = velocity_notes("the compliance model", model.velocity, causal, half_window)
     em = Emitter(precision)

@@ -112,7 +112,7 @@ def expected(
             | np.asarray(est.unresolved).astype(np.uint32) * 4
         )
         return np.asarray(est.torque, np.float64), flags
-    from ..network._estimate import network_features
+    from ..network.internal import network_features
 
     torque = np.asarray(predict_torque(network, recording, joint, causal=True), np.float64)
     feats = network_features(network, recording, joint, causal=True)

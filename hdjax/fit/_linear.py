@@ -45,8 +45,8 @@ from .._errors import CalibrationError, ConfigError, DataError
 from .._features import signals
 from .._recording import Recording
 from .._solution import RESULTS, Solution
-from ..compliance._lstsq import select_active
-from ..compliance._model import ComplianceModel
+from ..compliance import ComplianceModel
+from ..compliance.internal import select_active
 
 METHODS = ("gauss_newton", "levenberg_marquardt", "adam")
 

@@ -39,7 +39,7 @@ from pathlib import Path
 from .._errors import ConfigError, check_keys, did_you_mean
 from .._io import ColumnMap, read_toml
 from .._joint import Joint
-from ..compliance._stream_fit import MIN_CHUNK
+from ..compliance.internal import MIN_CHUNK
 
 TASKS = ("calibrate", "calibrate+discover", "estimate")
 

@@ -9,7 +9,7 @@ import numpy as np
 from .._formats import require
 from .._io import atomic_write_bytes
 from .._plotting import png_bytes, pyplot
-from ..compliance._model import is_segment_name
+from ..compliance.internal import is_segment_name
 
 FIXED = (
     ("task_id", "string"),

@@ -26,12 +26,11 @@ from ..compliance import (
     calibrate_stream,
     estimate_torque,
 )
-from ..compliance._stream_fit import peak_abs
+from ..compliance.internal import peak_abs
 from ..config import check_compatible, load_model
-from ..config._saved_model import ratio_mismatch
-from ..config._schema import paper_model
+from ..config.internal import paper_model, ratio_mismatch
 from ..discover import DiscoverOptions, discover
-from ..pipelines._streamed import ErrorSums, model_estimates
+from ..pipelines.internal import ErrorSums, model_estimates
 
 ARCSEC = 648000.0 / np.pi
 _CACHE_SET: list = []

@@ -26,9 +26,8 @@ from ..compliance import (
     calibrate_stream,
     estimate_torque,
 )
-from ..config._saved_model import check_compatible, load_model
-from ..config._schema import model_of
-from ..config._streamed import PartStream
+from ..config import check_compatible, load_model
+from ..config.internal import PartStream, model_of
 from ..discover import calibrate_start, calibrate_structure
 from . import _streamed as S
 

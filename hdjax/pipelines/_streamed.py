@@ -31,10 +31,15 @@ from .. import network as nw
 from .._errors import ConfigError, DataError
 from .._features import signals
 from ..compliance import RecordingStream, estimate_torque
-from ..compliance._stream_fit import SMOOTH_HALF_WINDOW, _arrays, _recording, windows
+from ..compliance.internal import (
+    SMOOTH_HALF_WINDOW,
+    recording_arrays,
+    recording_from_arrays,
+    windows,
+)
 from ..effects import Column
-from ..effects._dahl_carry import DahlCarry, is_sequential
-from ..network._kalman import PAPER_P0, PAPER_Q, PAPER_R, kalman_filter
+from ..effects.internal import DahlCarry, is_sequential
+from ..network import PAPER_P0, PAPER_Q, PAPER_R, kalman_filter
 
 FIGURE_LIMIT = 6000
 """Samples a torque figure plots at most (`hdjax.report` decimates to this)."""
@@ -312,10 +317,10 @@ def head(stream: RecordingStream, n: int):
     parts, got = [], 0
     for chunks in stream:
         for c in chunks:
-            parts.append(_arrays(c))
+            parts.append(recording_arrays(c))
             got += c.n_samples
             if got >= n:
                 break
         break
     cols = {k: np.concatenate([p[k] for p in parts])[:n] for k in parts[0]}
-    return _recording(cols, stream.label)
+    return recording_from_arrays(cols, stream.label)

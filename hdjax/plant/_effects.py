@@ -25,8 +25,8 @@ from __future__ import annotations
 from .. import effects
 from .._custom_types import ArrayInput
 from .._errors import ConfigError, did_you_mean
-from ..effects._base import AbstractPlantEffect, check_slot
-from ..effects._fields import concrete as _concrete
+from ..effects import AbstractPlantEffect
+from ..effects.internal import check_slot, concrete as _concrete
 
 __all__ = ["EFFECT_NAMES", "check_effect_name", "make_effect", "_concrete"]
 
