@@ -54,20 +54,29 @@ def lara8_dir() -> Path:
 # XLA compiling programs that the tests of one file share). Here a worker takes whole files, the
 # known slow ones first (longest-processing-time order keeps the two workers' totals level; the
 # small files at the end fill the gaps). `HDJAX_TEST_DIST=load` restores xdist's default, to
-# compare. The weights are rough seconds on a 2-core machine; an unlisted file counts as 1 s per
-# test.
+# compare. The weights are seconds measured on a 2-core machine (`--durations`, summed per
+# file); an unlisted file counts as 1 s per test.
 SLOW_FILES = {
-    "test_discover_plant.py": 150,
-    "test_discover_trust.py": 120,
-    "test_discover_partial_swing.py": 45,
-    "test_discover_families.py": 40,
-    "test_readme.py": 35,
-    "test_discover_loop.py": 35,
-    "test_lara8_reference.py": 25,
-    "test_plant_simulate.py": 25,
-    "test_fleet.py": 60,
-    "test_fleet_chunked.py": 25,
+    "test_discover_trust.py": 170,
+    "test_real_log.py": 125,
+    "test_discover_plant.py": 115,
+    "test_fleet.py": 70,
+    "test_discover_families.py": 65,
+    "test_discover_loop.py": 55,
+    "test_plant_gradients.py": 50,
+    "test_docs.py": 40,
+    "test_readme.py": 32,
+    "test_discover_chunked.py": 30,
+    "test_discover_partial_swing.py": 30,
+    "test_plant_simulate.py": 27,
     "test_cache_discover.py": 25,
+    "test_cli_broken_inputs.py": 20,
+    "test_fleet_chunked.py": 16,
+    "test_discover_cli.py": 15,
+    "test_export.py": 15,
+    "test_config_data.py": 13,
+    "test_cache.py": 12,
+    "test_lara8_reference.py": 12,
 }
 
 
