@@ -34,12 +34,8 @@ from ._nested import (
     member_message as member_message,
     nested_fit as nested_fit,
 )
-from ._shape import (
-    solve_on as solve_on,
-)
-from ._stream import (
-    scaled_cho_factor as scaled_cho_factor,
-)
+from ._shape import solve_on as solve_on
+from ._stream import scaled_cho_factor as scaled_cho_factor
 from ._stream_fit import (
     MIN_CHUNK as MIN_CHUNK,
     SMOOTH_HALF_WINDOW as SMOOTH_HALF_WINDOW,

@@ -4,19 +4,11 @@ its report writer, for the command line.
 Not part of the documented API: these names may change with the packages that use them.
 """
 
-from ._chunked import (
-    check_chunk as check_chunk,
-)
+from ._chunked import check_chunk as check_chunk
 from ._config import (
     discover_options as discover_options,
     load_discover_config as load_discover_config,
 )
-from ._experiment import (
-    experiment_toml as experiment_toml,
-)
-from ._loop import (
-    discover as discover,
-)
-from ._report import (
-    write_report_into as write_report_into,
-)
+from ._experiment import experiment_toml as experiment_toml
+from ._loop import discover as discover
+from ._report import write_report_into as write_report_into

@@ -3,6 +3,4 @@
 Not part of the documented API: these names may change with the packages that use them.
 """
 
-from ._estimate import (
-    network_features as network_features,
-)
+from ._estimate import network_features as network_features

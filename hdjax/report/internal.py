@@ -3,6 +3,4 @@
 Not part of the documented API: these names may change with the packages that use them.
 """
 
-from ._figures import (
-    KNEE_RULE as KNEE_RULE,
-)
+from ._figures import KNEE_RULE as KNEE_RULE
