@@ -152,7 +152,8 @@ def _statistics(batch_passes, y, blocks, select) -> BlockStatistics:
                 p = a.shape[1]
                 batch_widths = [int(g.shape[1]) for g in groups]
                 ac = np.zeros((p, sum(batch_widths)))
-                aa, ay = np.zeros((p, p)), np.zeros(p)
+                if project is None:
+                    aa, ay = np.zeros((p, p)), np.zeros(p)
             if project is None:
                 aa += a.T @ a
                 ay += a.T @ y[lo:hi]

@@ -416,10 +416,10 @@ def row_gram(model, rows: RowSource, y: np.ndarray) -> np.ndarray:
     return g
 
 
-def partial_out(model, chunks: RowSource, y, others, cols, gram):
+def partial_out(model, rows: RowSource, y, others, cols, gram):
     """The columns `cols` of the design and the target `y`, each made orthogonal to the
     columns `others` (the residuals of their least-squares fits on them, Frisch-Waugh-Lovell),
-    the design's rows read from `chunks` (one chunk for a design in memory).
+    the design's rows read from `rows` (one chunk for a design in memory).
 
     `gram` is the Gram matrix of `[design | y]` ([`row_gram`][]). The fits are the corrected
     semi-normal equations on the Jacobi-scaled Gram block of `others` (one refinement step
@@ -435,7 +435,7 @@ def partial_out(model, chunks: RowSource, y, others, cols, gram):
         return np.concatenate([a[:, cols], y[lo:hi, None]], axis=1)
 
     if others.size == 0:
-        for lo, hi, a in chunks.designs(model):
+        for lo, hi, a in rows.designs(model):
             t[lo:hi] = target(lo, hi, a)
         return t[:, :-1], t[:, -1]
     p = gram.shape[0] - 1
@@ -446,7 +446,7 @@ def partial_out(model, chunks: RowSource, y, others, cols, gram):
     if chol is None:
         k = others.size
         r = np.zeros((0, k + m + 1))
-        for lo, hi, a in chunks.designs(model):
+        for lo, hi, a in rows.designs(model):
             block = np.concatenate([a[:, others] / d, target(lo, hi, a)], axis=1)
             r = np.linalg.qr(np.vstack([r, block]), mode="r")
         r_full = np.zeros((k + m + 1, k + m + 1))
@@ -456,12 +456,12 @@ def partial_out(model, chunks: RowSource, y, others, cols, gram):
         # one refinement step with the true residual (seminormal equations on R), as the
         # Cholesky branch takes: the chunks' R is as accurate as one QR's, its solve is not
         atr = np.zeros((k, m + 1))
-        for lo, hi, a in chunks.designs(model):
+        for lo, hi, a in rows.designs(model):
             ao = a[:, others] / d
             atr += ao.T @ (target(lo, hi, a) - ao @ z)
         z += scipy.linalg.lstsq(r11, scipy.linalg.lstsq(r11.T, atr)[0])[0]
         w_o = z / d[:, None]
-        for lo, hi, a in chunks.designs(model):
+        for lo, hi, a in rows.designs(model):
             t[lo:hi] = target(lo, hi, a) - a[:, others] @ w_o
         return t[:, :-1], t[:, -1]
     factor = chol[0]
@@ -473,11 +473,11 @@ def partial_out(model, chunks: RowSource, y, others, cols, gram):
         / d[:, None]
     )
     atr = np.zeros((p, m + 1))
-    for lo, hi, a in chunks.designs(model):
+    for lo, hi, a in rows.designs(model):
         atr += a.T @ (target(lo, hi, a) - a @ w)
     w[others] += (
         scipy.linalg.cho_solve(factor, atr[others] / d[:, None], check_finite=False) / d[:, None]
     )
-    for lo, hi, a in chunks.designs(model):
+    for lo, hi, a in rows.designs(model):
         t[lo:hi] = target(lo, hi, a) - a @ w
     return t[:, :-1], t[:, -1]
