@@ -19,7 +19,7 @@ from hdjax.compliance import (
     calibrate_lstsq,
     calibration_messages,
 )
-from hdjax.compliance._lstsq import _base_column_list, compact_column_list, term_columns
+from hdjax.compliance._lstsq import _base_column_list, _term_columns, compact_column_list
 from hdjax.effects import TORQUE_PATH, Backlash
 from tests.helpers import JOINT, make_signals, numpy_design, sim_recording, simulate
 
@@ -188,10 +188,10 @@ def test_recording_without_torque_is_refused():
 def test_no_recompilation_on_second_call(exact_case):
     c = exact_case
     calibrate_lstsq(c.model, (c.sig, c.torque))
-    before = [f._cached._cache_size() for f in (_base_column_list, term_columns)]
+    before = [f._cached._cache_size() for f in (_base_column_list, _term_columns)]
     with warnings.catch_warnings():
         calibrate_lstsq(c.model, (c.sig, c.torque))
-    assert [f._cached._cache_size() for f in (_base_column_list, term_columns)] == before
+    assert [f._cached._cache_size() for f in (_base_column_list, _term_columns)] == before
 
 
 def test_compact_columns_equal_a_single_program_bit_for_bit():

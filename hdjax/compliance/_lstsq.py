@@ -46,6 +46,7 @@ from .._features import signals
 from .._recording import Recording
 from .._solution import RESULTS, Solution
 from ..effects import TORQUE_PATH
+from ..effects.internal import join_hypers, run_split, split_hypers, with_fields
 from ._model import ComplianceModel, base_term_columns
 from ._shape import ShapeConstraint, ShapeData, torque_grid
 from ._signals import Signals
@@ -79,9 +80,34 @@ def prepare(model: ComplianceModel, data) -> tuple[Signals, jax.Array]:
     raise DataError(f"expected a Recording or a (Signals, torque) pair, got {type(data).__name__}")
 
 
-@eqx.filter_jit
 def design_columns(model: ComplianceModel, sig: Signals, torque):
-    return model.design(sig, torque)
+    """The design matrix of eq. (15) in one compiled program per model structure: neither the
+    active flags (the design does not read them) nor the effect terms' float hyperparameters
+    (handed in as values, `split_hypers`) are part of its key."""
+    return run_split(_design_columns, split_model_hypers, model, sig, torque)
+
+
+@eqx.filter_jit
+def _design_columns(skeleton, values, sig: Signals, torque):
+    return join_model_hypers(skeleton, values).design(sig, torque)
+
+
+def split_model_hypers(model: ComplianceModel, *, keep_active: bool = False):
+    """`model` with its effect terms split as [`split_hypers`][] splits one (and, unless
+    `keep_active`, every coefficient marked active), and the terms' values, one dict per term."""
+    parts = [split_hypers(term) for term in model.effect_terms]
+    fields = {"effect_terms": tuple(p[0] for p in parts)}
+    if not keep_active:
+        fields["active"] = (True,) * model.n_coef
+    return with_fields(model, fields), tuple(p[1] for p in parts)
+
+
+def join_model_hypers(skeleton: ComplianceModel, values: tuple) -> ComplianceModel:
+    """The model [`split_model_hypers`][] split, with its terms' values put back."""
+    if not any(values):
+        return skeleton
+    terms = tuple(join_hypers(t, v) for t, v in zip(skeleton.effect_terms, values))
+    return with_fields(skeleton, {"effect_terms": terms})
 
 
 @jax.jit
@@ -114,10 +140,16 @@ def _base_column_list(terms: tuple, sig: Signals) -> list:
     return base_term_columns(terms, sig)
 
 
-@eqx.filter_jit
 def term_columns(term, sig: Signals, torque) -> Float[jax.Array, "n k"]:
-    """One effect group's columns (one program per group)."""
-    return term.columns(sig, torque)
+    """One effect group's columns: one compiled program per group structure, whatever its
+    float hyperparameters' values (orders, widths, delays, scales: handed in as values,
+    `split_hypers`)."""
+    return run_split(_term_columns, split_hypers, term, sig, torque)
+
+
+@eqx.filter_jit
+def _term_columns(skeleton, values, sig: Signals, torque) -> Float[jax.Array, "n k"]:
+    return join_hypers(skeleton, values).columns(sig, torque)
 
 
 def term_signals(sig: Signals) -> Signals:

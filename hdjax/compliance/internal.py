@@ -19,8 +19,10 @@ from ._lstsq import (
     compact_column_list as compact_column_list,
     design_columns as design_columns,
     failure_message as failure_message,
+    join_model_hypers as join_model_hypers,
     prepare as prepare,
     select_active as select_active,
+    split_model_hypers as split_model_hypers,
     term_columns as term_columns,
     term_signals as term_signals,
 )

@@ -17,6 +17,7 @@ through the record causally from the estimate, as they run through TEST.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import warnings
 
 import equinox as eqx
@@ -41,10 +42,13 @@ from ..compliance.internal import (
     design_columns,
     effect_groups,
     invert_twist,
+    join_model_hypers,
+    split_model_hypers,
     term_columns,
     term_signals,
 )
 from ..effects import SEGMENT_START, TORQUE_PATH
+from ..effects.internal import join_hypers, run_split, split_hypers
 from ._chunked import Chunks
 from ._fold_solver import FoldSolver, one_block
 from ._folds import memory_starts, segment_starts
@@ -298,14 +302,23 @@ def chunks_of(sig: Signals, torque, chunk: int) -> Chunks:
     return Chunks(sig, torque, chunk, design)
 
 
-@eqx.filter_jit
 def _less_columns(term, sig: Signals, coef, r) -> Float[Array, " n"]:
-    return r - term.columns(sig, None) @ coef
+    # as `term_columns`: one program per group structure, the hyperparameters as values
+    return run_split(_less_columns_jit, split_hypers, term, sig, coef, r)
 
 
 @eqx.filter_jit
+def _less_columns_jit(skeleton, values, sig: Signals, coef, r) -> Float[Array, " n"]:
+    return r - join_hypers(skeleton, values).columns(sig, None) @ coef
+
+
 def _torque_gain(term, sig: Signals, coef) -> Float[Array, " n"]:
-    return term.torque_gain(sig, coef)
+    return run_split(_torque_gain_jit, split_hypers, term, sig, coef)
+
+
+@eqx.filter_jit
+def _torque_gain_jit(skeleton, values, sig: Signals, coef) -> Float[Array, " n"]:
+    return join_hypers(skeleton, values).torque_gain(sig, coef)
 
 
 @eqx.filter_jit
@@ -313,8 +326,15 @@ def _gain_sum(g, gi) -> Float[Array, " n"]:
     return g + gi
 
 
-@eqx.filter_jit
 def _invert_rest(core: ComplianceModel, sig: Signals, r, g):
+    # one program per structure: the terms' float hyperparameters are handed in as values
+    split = functools.partial(split_model_hypers, keep_active=True)
+    return run_split(_invert_rest_jit, split, core, sig, r, g)
+
+
+@eqx.filter_jit
+def _invert_rest_jit(skeleton: ComplianceModel, values: tuple, sig: Signals, r, g):
+    core = join_model_hypers(skeleton, values)
     # linear groups left in `core` (beside a memoryless one) add their gain inside this program
     for term, c in effect_groups(core)["linear"]:
         g = term.torque_gain(sig, c) if g is None else g + term.torque_gain(sig, c)

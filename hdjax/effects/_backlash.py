@@ -23,6 +23,7 @@ from .._custom_types import Array, Float, Pointwise, PointwiseOut
 from ._base import AbstractMemorylessTerm, AbstractPlantEffect, AbstractTorqueScaleFamily
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, hyper, labels
+from ._traced import opaque
 
 
 class Backlash(AbstractMemorylessTerm):
@@ -33,8 +34,9 @@ class Backlash(AbstractMemorylessTerm):
     key, names = labels("backlash:torque", "tanh(T/{width})")
 
     def value_and_slope(self, torque: Pointwise) -> tuple[PointwiseOut, PointwiseOut]:
-        v = jnp.tanh(torque / self.width)
-        return v, (1.0 - v**2) / self.width
+        w = opaque(self.width)  # a constant width rounds as a traced one
+        v = jnp.tanh(torque / w)
+        return v, (1.0 - v**2) / w
 
     def numpy_value(self, torque: Pointwise) -> Float[np.ndarray, "*shape"]:
         return np.tanh(np.asarray(torque) / self.width)

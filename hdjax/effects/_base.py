@@ -125,6 +125,11 @@ class AbstractTerm(eqx.Module):
 
     torque_kind: eqx.AbstractClassVar[str]
     score_in_numpy: ClassVar[bool] = True
+    static_hypers: ClassVar[tuple[str, ...]] = ()
+    """Float hyperparameters that the column programs keep as constants. The others reach
+    them as traced values (one compiled program then serves every value), so the columns must
+    compute with a traced value wherever they read one: a term that branches on such a value
+    (beyond its sign) names it here."""
     c_code: ClassVar[Callable | None] = None
 
     def __check_init__(self):

@@ -18,13 +18,15 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, ArrayInput, Float
+from .._custom_types import Array, ArrayInput, Float, Scalar
 from .._errors import ConfigError
 
 
-def fmt(x: float) -> str:
-    """A number as a short decimal string (`2`, `1.98`, `0.5`) for column names and keys."""
-    return f"{x:.10g}"
+def fmt(x: Scalar) -> str:
+    """A number as a short decimal string (`2`, `1.98`, `0.5`) for column names and keys; a
+    traced value (a term inside a compiled program, where only the number of its names is
+    read) as `?`."""
+    return f"{x:.10g}" if isinstance(x, (int, float)) else "?"
 
 
 def is_finite_number(x) -> bool:

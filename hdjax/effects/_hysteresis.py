@@ -32,6 +32,7 @@ from .._custom_types import (
     PointwiseOut,
     Samples,
     SamplesLike,
+    Scalar,
     Shaped,
 )
 from .._errors import ConfigError, did_you_mean
@@ -49,10 +50,11 @@ from ._base import (
 )
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, concrete, fmt, hyper, labels
+from ._traced import opaque
 
 
 def dahl_state(
-    torque: SamplesLike, torque_scale: float, reset: Shaped[ArrayLike, " n"] | None = None
+    torque: SamplesLike, torque_scale: Scalar, reset: Shaped[ArrayLike, " n"] | None = None
 ) -> Samples:
     """Causal Dahl-type hysteresis state driven by a torque path.
 
@@ -85,7 +87,7 @@ def _dahl_scan(du, reset):
 
 
 def dahl_state_numpy(
-    torque: SamplesLike, torque_scale: float, reset: Shaped[ArrayLike, " n"] | None = None
+    torque: SamplesLike, torque_scale: Scalar, reset: Shaped[ArrayLike, " n"] | None = None
 ) -> Float[np.ndarray, " n"]:
     """[`dahl_state`][] in NumPy, vectorised (no loop over samples).
 
@@ -139,7 +141,7 @@ def _affine_recurrence(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def dahl_initial(
-    driver: SamplesLike, torque_scale: float, reset: Shaped[ArrayLike, " n"] | None = None
+    driver: SamplesLike, torque_scale: Scalar, reset: Shaped[ArrayLike, " n"] | None = None
 ) -> Float[ArrayLike, " n"]:
     r"""The column that carries a Dahl state's initial value: $s\,P_k$ with
     $P_k = \prod_{j \le k} a_j$, $a_j = \max(0, 1 - |\Delta u_j| / T_h)$, from 1 at the record's
@@ -207,10 +209,11 @@ def _dahl_column(
     `term.initial` $\\zeta$ times the first motion's direction ([`dahl_initial`][])."""
     driver = term.dahl_driver(sig, torque)
     reset = sig.extras.get(SEGMENT_START)
-    z = dahl_state(driver, term.torque_scale, reset)
+    scale = opaque(term.torque_scale)  # a constant width rounds as a traced one
+    z = dahl_state(driver, scale, reset)
     zeta = float(getattr(term, "initial", 0.0))
     if zeta:
-        z = z + zeta * dahl_initial(jnp.asarray(driver), term.torque_scale, reset)
+        z = z + zeta * dahl_initial(jnp.asarray(driver), scale, reset)
     lag = getattr(term, "lag", False)
     return (late(z, reset, None) if lag else z)[:, None]
 
@@ -306,6 +309,9 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
     torque_scale: float = hyper(1.0, positive=True)
     compliance: float = hyper(1.0, positive=True)
     initial: float = hyper(0.0)
+
+    static_hypers: ClassVar[tuple[str, ...]] = ("initial",)
+    """The initial state is a constant of the column programs: they branch on it being 0."""
 
     @property
     def key(self) -> str:

@@ -34,6 +34,7 @@ from ._base import (
 )
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, fmt, hyper
+from ._traced import opaque
 
 
 def c_harmonic_pairs(c: AbstractCEmitter, arg: str, order: int, tag: str) -> tuple[list, list]:
@@ -135,7 +136,7 @@ class Harmonics(AbstractColumnListTerm):
         theta = sig.get(self.signal)
         cols = []
         for k in self.orders:
-            s, c = sincos(k * theta)
+            s, c = sincos(opaque(k) * theta)  # a constant order rounds as a traced one
             cols += [c, s]
         return cols
 

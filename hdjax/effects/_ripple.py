@@ -52,6 +52,7 @@ from ._base import (
 )
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, concrete, fmt, hyper
+from ._traced import opaque
 
 MAX_RIPPLE = 0.5
 """Largest total relative ripple $\\sum_j a_j$ the plant accepts (the compliance stays positive)."""
@@ -83,8 +84,8 @@ class Ripple(AbstractLinearTorqueTerm):
         return (f"T/{t}*sin({k}*{s})", f"T/{t}*cos({k}*{s})")
 
     def torque_slope(self, sig: Signals) -> Float[Array, "n 2"]:
-        s, c = sincos(self.order * sig.get(self.signal))
-        return jnp.stack([s, c], axis=1) * (1.0 / self.torque_scale)
+        s, c = sincos(opaque(self.order) * sig.get(self.signal))  # as a traced order rounds
+        return jnp.stack([s, c], axis=1) * opaque(1.0 / self.torque_scale)
 
     def numpy_torque_slope(self, sig: Signals) -> Float[np.ndarray, "n 2"]:
         th = self.order * np.asarray(sig.get(self.signal))

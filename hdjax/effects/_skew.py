@@ -42,12 +42,13 @@ from typing import ClassVar
 import jax.numpy as jnp
 import numpy as np
 
-from .._custom_types import Array, ArrayLike, Float, SamplesLike
+from .._custom_types import Array, ArrayLike, Float, SamplesLike, Scalar
 from .._errors import ConfigError
 from .._features import Signals
 from ._base import AbstractFamily, AbstractTorqueFreeTerm, Candidate, CandidateContext
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import fmt, hyper, rounded
+from ._traced import opaque
 
 BACK_SAMPLES = 16
 """How many samples back the delayed encoder value is searched (a delay of up to this many
@@ -66,7 +67,7 @@ REFINE_RTOL = 1e-3
 """A fitted delay within this fraction of the term's own is taken as converged."""
 
 
-def delayed(t, x, delay: float, xp: ModuleType = np):
+def delayed(t, x, delay: Scalar, xp: ModuleType = np):
     """`x` at the instants `t - delay` (`delay >= 0`), by linear interpolation between the
     recorded samples at or before each instant (up to `BACK_SAMPLES` back, the oldest of them
     beyond); an instant before the record starts keeps the sample's own value. Samples across
@@ -123,10 +124,16 @@ class EncoderSkew(AbstractTorqueFreeTerm):
             raise ConfigError(f"EncoderSkew: delay must be finite and nonzero, got {self.delay!r}")
 
     def _column(self, sig: Signals, xp: ModuleType):
-        d = abs(float(self.delay))
+        # written for a delay that is a traced value too (a compiled column program serves
+        # every delay, see `split_hypers`): both encoders' angles, the later one selected;
+        # constants made opaque round as traced values do
+        delay, ratio, sign = self.delay, self.ratio, self.sign
+        if xp is jnp:
+            delay, ratio, sign = opaque(delay), opaque(ratio), opaque(sign)
+        d = xp.abs(delay)
         t = xp.asarray(sig.t)
-        x = xp.asarray(sig.theta_l) if self.delay > 0 else xp.asarray(sig.theta_m) / self.ratio
-        return self.sign * (x - delayed(t, x, d, xp)) / d
+        x = xp.where(delay > 0, xp.asarray(sig.theta_l), xp.asarray(sig.theta_m) / ratio)
+        return sign * (x - delayed(t, x, d, xp)) / d
 
     def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
         return self._column(sig, jnp)[:, None]

@@ -18,6 +18,7 @@ from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut
 from ._base import AbstractMemorylessTerm, AbstractPlantEffect, AbstractTorqueScaleFamily
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, hyper, labels
+from ._traced import opaque
 
 
 class Stiffening(AbstractMemorylessTerm):
@@ -30,8 +31,9 @@ class Stiffening(AbstractMemorylessTerm):
     def value_and_slope(
         self, torque: Pointwise
     ) -> tuple[Float[ArrayLike, "*shape"], Float[ArrayLike, "*shape"]]:
-        u = torque / self.torque_scale
-        return u**3, 3.0 * u**2 / self.torque_scale
+        s = opaque(self.torque_scale)  # a constant scale rounds as a traced one
+        u = torque / s
+        return u**3, 3.0 * u**2 / s
 
     def numpy_value(self, torque: Pointwise) -> Float[np.ndarray, "*shape"]:
         return (np.asarray(torque) / self.torque_scale) ** 3

@@ -18,6 +18,7 @@ from __future__ import annotations
 from types import ModuleType
 from typing import ClassVar
 
+import jax
 import numpy as np
 
 from .._custom_types import Array, ArrayLike, Float, Pointwise, PointwiseOut, Samples, SamplesLike
@@ -32,6 +33,7 @@ from ._base import (
 )
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, hyper, labels, rounded
+from ._traced import opaque
 
 
 class Column(AbstractSignalTerm):
@@ -81,8 +83,12 @@ class ColumnTimesTorque(AbstractLinearTorqueTerm):
         return CSnippet(columns=(f"({x} - {c.num(self.center)}) / {s}",))
 
     def _slope(self, x):
-        # the same arithmetic for JAX and NumPy arrays
-        return (x - self.center) / (self.scale * self.torque_scale)
+        # the same arithmetic for JAX and NumPy arrays; in JAX the constants made opaque, so
+        # that they round as traced values do (XLA would fold them into the inversion's own)
+        center, scale = self.center, self.scale * self.torque_scale
+        if isinstance(x, jax.Array):
+            center, scale = opaque(center), opaque(scale)
+        return (x - center) / scale
 
 
 class Temperature(AbstractPlantEffect):

@@ -1,5 +1,5 @@
-"""What `hdjax.effects` lends to the other hdjax packages: the Dahl state carried across chunks and
-the helpers of the plant's effects.
+"""What `hdjax.effects` lends to the other hdjax packages: the Dahl state carried across chunks,
+the helpers of the plant's effects, and terms split for compiled programs.
 
 Not part of the documented API: these names may change with the packages that use them.
 """
@@ -11,3 +11,9 @@ from ._dahl_carry import (
 )
 from ._fields import concrete as concrete
 from ._skew import BACK_SAMPLES as BACK_SAMPLES
+from ._traced import (
+    join_hypers as join_hypers,
+    run_split as run_split,
+    split_hypers as split_hypers,
+    with_fields as with_fields,
+)
