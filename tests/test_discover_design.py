@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from hdjax.compliance import (
+    Column,
     ColumnTimesTorque,
     ComplianceModel,
     Coulomb,
@@ -94,6 +95,8 @@ def test_estimate_by_parts_equals_the_single_program(per_segment):
         ColumnTimesTorque(name="temperature", center=20.0, scale=2.0, torque_scale=400.0),
         Ripple(signal="theta_l", order=2.7, torque_scale=400.0),
         EncoderSkew(delay=-4.9e-4, ratio=JOINT.ratio, sign=1.0),
+        Viscous(signal="omega_m", scale=0.07),
+        Column(name="temperature", center=20.3, scale=2.7),
         Backlash(width=20.0),
     )
     data = pipeline_signals(rec, model.ratio, model.twist_sign, model.velocity)

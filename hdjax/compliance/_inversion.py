@@ -44,6 +44,7 @@ from .._errors import ConfigError, InversionError, ModelMismatchError
 from .._features import signals
 from .._recording import Recording
 from ..effects import SEGMENT_START
+from ..effects.internal import opaque
 from ._lstsq import check_invertible
 from ._model import ComplianceModel
 from ._signals import Signals
@@ -246,7 +247,7 @@ def _path_states(t0, slope, reset, terms):
     for any loop gain, where an explicit one oscillates once $|a_i| / T_{h,i}$ exceeds 1.
     States restart at 0 where `reset` is set (a gap). **Returns:** one state array per term.
     """
-    scales = [term.torque_scale for term, _ in terms]
+    scales = [opaque(term.torque_scale) for term, _ in terms]  # as traced values round
     coefs = [c[0] for _, c in terms]
     reset = jnp.zeros(t0.shape, bool) if reset is None else jnp.asarray(reset).astype(bool)
 

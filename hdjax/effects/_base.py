@@ -128,8 +128,8 @@ class AbstractTerm(eqx.Module):
     static_hypers: ClassVar[tuple[str, ...]] = ()
     """Float hyperparameters that the column programs keep as constants. The others reach
     them as traced values (one compiled program then serves every value), so the columns must
-    compute with a traced value wherever they read one: a term that branches on such a value
-    (beyond its sign) names it here."""
+    compute with a traced value wherever they read one (no Python `if` or `float()` on it; select
+    with `jnp.where`): a term whose columns branch on such a value in Python names it here."""
     c_code: ClassVar[Callable | None] = None
 
     def __check_init__(self):

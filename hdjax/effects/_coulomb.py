@@ -27,6 +27,7 @@ from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm, Candida
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, hyper, labels
 from ._friction import friction_effects, velocity_candidates
+from ._traced import opaque_in
 
 
 class Coulomb(AbstractSignalTerm):
@@ -38,7 +39,7 @@ class Coulomb(AbstractSignalTerm):
     key, names = labels("coulomb:{signal}", "tanh({signal}/{omega_s})")
 
     def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
-        return xp.tanh(x / self.omega_s)
+        return xp.tanh(x / opaque_in(xp, self.omega_s))  # as a traced value rounds
 
     def c_code(self, c: AbstractCEmitter) -> CSnippet:
         """The smooth sign for the exported estimator."""

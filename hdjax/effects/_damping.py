@@ -23,6 +23,7 @@ from .._features import Signals
 from ._base import AbstractFamily, AbstractTorqueFreeTerm, Candidate, CandidateContext
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import hyper, labels, rounded
+from ._traced import opaque_hypers
 
 
 class TwistRate(AbstractTorqueFreeTerm):
@@ -43,7 +44,8 @@ class TwistRate(AbstractTorqueFreeTerm):
     key, names = labels("damping:twist_rate", "twist_rate/{scale}")
 
     def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
-        return self._column(sig.omega_m, sig.omega_l)[:, None]
+        # constants round as traced values do (`opaque_hypers`)
+        return opaque_hypers(self)._column(sig.omega_m, sig.omega_l)[:, None]
 
     def numpy_columns(
         self, sig: Signals, torque: SamplesLike | None = None

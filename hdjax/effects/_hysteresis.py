@@ -50,7 +50,7 @@ from ._base import (
 )
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, concrete, fmt, hyper, labels
-from ._traced import opaque
+from ._traced import opaque_hypers
 
 
 def dahl_state(
@@ -207,13 +207,13 @@ def _dahl_column(
     """The Dahl state ([`dahl_state`][hdjax.effects.dahl_state]; the loop of Song et al. Fig. 2)
     of `term.dahl_driver` as one column, restarted at `SEGMENT_START` from the state
     `term.initial` $\\zeta$ times the first motion's direction ([`dahl_initial`][])."""
+    term = opaque_hypers(term)  # constants round as traced values do
     driver = term.dahl_driver(sig, torque)
     reset = sig.extras.get(SEGMENT_START)
-    scale = opaque(term.torque_scale)  # a constant width rounds as a traced one
-    z = dahl_state(driver, scale, reset)
+    z = dahl_state(driver, term.torque_scale, reset)
     zeta = float(getattr(term, "initial", 0.0))
     if zeta:
-        z = z + zeta * dahl_initial(jnp.asarray(driver), scale, reset)
+        z = z + zeta * dahl_initial(jnp.asarray(driver), term.torque_scale, reset)
     lag = getattr(term, "lag", False)
     return (late(z, reset, None) if lag else z)[:, None]
 

@@ -35,6 +35,7 @@ from ._c import AbstractCEmitter, CSnippet
 from ._coulomb import Coulomb
 from ._fields import bound, hyper, labels
 from ._friction import friction_effects, velocity_candidates
+from ._traced import opaque_in
 
 
 class Stribeck(AbstractSignalTerm):
@@ -50,8 +51,9 @@ class Stribeck(AbstractSignalTerm):
     )
 
     def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
-        u = x / self.omega_st
-        return xp.exp(-(u * u)) * xp.tanh(x / self.omega_s)
+        omega_st, omega_s = opaque_in(xp, self.omega_st, self.omega_s)  # as traced values
+        u = x / omega_st
+        return xp.exp(-(u * u)) * xp.tanh(x / omega_s)
 
     def c_code(self, c: AbstractCEmitter) -> CSnippet:
         """The Stribeck excess for the exported estimator."""

@@ -33,7 +33,7 @@ from ._base import (
 )
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, hyper, labels, rounded
-from ._traced import opaque
+from ._traced import opaque, opaque_in
 
 
 class Column(AbstractSignalTerm):
@@ -51,7 +51,8 @@ class Column(AbstractSignalTerm):
         return self.name
 
     def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
-        return (x - self.center) / self.scale
+        center, scale = opaque_in(xp, self.center, self.scale)  # as traced values round
+        return (x - center) / scale
 
     def c_code(self, c: AbstractCEmitter) -> CSnippet:
         """The centred, scaled column for the exported estimator."""

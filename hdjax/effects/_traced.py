@@ -8,7 +8,8 @@ torque. With the values as constants, every new joint (and every refinement) com
 column program again: on a 2-core machine about 0.2 s each, most of a warm `hdjax discover`.
 
 [`split_hypers`][] keeps the term's structure static (its class, its strings and integers,
-and the sign of each float, which a term may branch on) and hands the float values apart, as
+and the sign of each float, so that values of either sign compile apart) and hands the float
+values apart, as
 float64 arrays; [`join_hypers`][] puts them back inside the compiled program. The columns are
 the same numbers, bit for bit: in these elementwise programs XLA folds no constant operand into
 another rounding (the tests compare the residual loop's design, built this way, with the
@@ -20,7 +21,8 @@ traced value cannot share. A term whose value meets such a constant passes it th
 [`opaque`][] first, so both forms round alike.
 
 A family keeps a float hyperparameter constant by naming it in its `static_hypers`: one that
-its columns branch on by value, not by sign (the hysteresis state's `initial`, say). A term whose
+its columns branch on in Python (the hysteresis state's `initial`, say): inside the program
+the value is traced, sign included, so the columns select with `jnp.where`. A term whose
 columns cannot compute with a traced value at all (a family written elsewhere that calls
 `float()` on one) still works: [`run_split`][] runs it with its constants, as before, and
 remembers its class.
@@ -46,7 +48,8 @@ def opaque(x: Scalar) -> jax.Array:
 
 
 def _sign(x: float) -> float:
-    # what the static skeleton keeps of a float: 0, or its sign (a term may branch on either)
+    # what the static skeleton keeps of a float: 0, or its sign (the program's key only: inside
+    # it the term holds the traced value)
     return 0.0 if x == 0 else math.copysign(1.0, x)
 
 
@@ -58,26 +61,56 @@ _NEEDS_CONSTANTS: set[type] = set()
 """Term classes whose compiled programs failed with their hyperparameters as values."""
 
 
+TRACER_ERRORS = (
+    jax.errors.ConcretizationTypeError,
+    jax.errors.TracerArrayConversionError,
+    jax.errors.TracerIntegerConversionError,
+)
+"""What a program raises when it reads a traced value as a Python number (`float()`, an `if`
+on it; `TracerBoolConversionError` is a `ConcretizationTypeError`)."""
+
+
 def run_split(program, split, obj, *args):
-    """`program(skeleton, values, *args)` with `split(obj) -> (skeleton, values)`; where that
-    fails to trace (a term's columns that need their hyperparameters as constants), the same
-    program with `obj` itself and no values, and the classes of the terms that were split are
-    remembered so that [`split_hypers`][] leaves them whole from then on. A failure of the
-    program itself is raised from that second call."""
+    """`program(skeleton, values, *args)` with `split(obj) -> (skeleton, values)`.
+
+    Where that fails to trace because a term reads a value as a Python number, the same
+    program runs with `obj` itself and no values (its constants, as before); a single term's
+    class is then remembered, so that [`split_hypers`][] leaves it whole from then on (the
+    residual loop evaluates every term alone before it inverts a model, so a model's culprit
+    is found there). Any other error is raised as it is.
+    """
     skeleton, values = split(obj)
-    if not any(values):  # no term with a value to hand apart
-        return program(obj, values, *args)
     try:
         return program(skeleton, values, *args)
-    except Exception:
-        terms = getattr(obj, "effect_terms", (obj,))
-        parts = values if isinstance(values, tuple) else (values,)
-        _NEEDS_CONSTANTS.update(type(t) for t, v in zip(terms, parts) if v)
-        return program(obj, _no_values(values), *args)
+    except TRACER_ERRORS:
+        if not any(values):
+            raise
+        out = program(obj, _no_values(values), *args)
+        if isinstance(values, dict):
+            _NEEDS_CONSTANTS.add(type(obj))
+        return out
 
 
 def _no_values(values):
     return tuple({} for _ in values) if isinstance(values, tuple) else {}
+
+
+def opaque_in(xp, *values):
+    """`values` made [`opaque`][] when `xp` is `jax.numpy` (a term's JAX columns), else as they
+    are (its NumPy twin): for the `transform(x, xp)` written once for both."""
+    out = tuple(opaque(v) for v in values) if xp is jnp else values
+    return out[0] if len(out) == 1 else out
+
+
+def opaque_hypers(term):
+    """`term` with each float hyperparameter [`split_hypers`][] would hand apart made
+    [`opaque`][] (for a term's JAX columns: the constants then round as traced values do)."""
+    _, values = split_hypers(term)
+    fields = {}
+    for name in values:
+        v = getattr(term, name)
+        fields[name] = tuple(opaque(x) for x in v) if isinstance(v, tuple) else opaque(v)
+    return with_fields(term, fields) if fields else term
 
 
 def split_hypers(term) -> tuple[object, dict[str, np.ndarray]]:

@@ -21,6 +21,7 @@ from ._base import AbstractFamily, AbstractFriction, AbstractSignalTerm, Candida
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, hyper, labels
 from ._friction import friction_effects, velocity_candidates
+from ._traced import opaque_in
 
 
 class Viscous(AbstractSignalTerm):
@@ -32,7 +33,7 @@ class Viscous(AbstractSignalTerm):
     key, names = labels("viscous:{signal}", "{signal}/{scale}")
 
     def transform(self, x: SamplesLike, xp: ModuleType) -> Float[ArrayLike, " n"]:
-        return x / self.scale
+        return x / opaque_in(xp, self.scale)  # a constant rounds as a traced value
 
     def c_code(self, c: AbstractCEmitter) -> CSnippet:
         """The scaled velocity for the exported estimator."""

@@ -13,6 +13,7 @@ from ._fields import concrete as concrete
 from ._skew import BACK_SAMPLES as BACK_SAMPLES
 from ._traced import (
     join_hypers as join_hypers,
+    opaque as opaque,
     run_split as run_split,
     split_hypers as split_hypers,
     with_fields as with_fields,
