@@ -153,11 +153,21 @@ def test_chunked_cross_validation_equals_in_memory(base, path):
     whole = pipe.cross_validate(fitted, data, folds)
     # 997: boundaries inside the folds' 230-sample blocks
     part = pipe.cross_validate(fitted, data, folds, chunk=997)
-    assert abs(part.torque_rms / whole.torque_rms - 1) < RTOL
     assert abs(part.twist_rms_arcsec / whole.twist_rms_arcsec - 1) < RTOL
-    assert _rel(part.fold_torque_rms, whole.fold_torque_rms) < RTOL
-    for f in range(len(folds)):
-        assert _rel(part.fold_estimate(f, data), whole.fold_estimate(f, data)) < RTOL
+    # An error RMS moves by at most the RMS of the estimates' difference on the rows it scores
+    # (Minkowski), so it is held to that, not to a fixed 1e-9: an error of a few N·m on a
+    # 400 N·m range magnifies the estimates' agreement (1e-10 of their range, the fits'
+    # accuracy on designs of scaled condition number 1e10) fifty-fold
+    sq_diff, n_scored = 0.0, 0
+    for f, rows in enumerate(pipe.scored_rows(data, folds)):
+        a, b = part.fold_estimate(f, data), whole.fold_estimate(f, data)
+        assert _rel(a, b) < RTOL
+        d2 = np.sum((a[rows] - b[rows]) ** 2)
+        moved = abs(part.fold_torque_rms[f] - whole.fold_torque_rms[f])
+        assert moved <= np.sqrt(d2 / rows.size) * (1 + 1e-9) + 1e-15 * b.std(), (f, moved)
+        sq_diff, n_scored = sq_diff + d2, n_scored + rows.size
+    moved = abs(part.torque_rms - whole.torque_rms)
+    assert moved <= np.sqrt(sq_diff / n_scored) * (1 + 1e-9) + 1e-15, moved
 
 
 @pytest.mark.parametrize("chunk", [0, 997])
