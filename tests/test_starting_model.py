@@ -2,19 +2,14 @@
 and `hdjax run` calibrates a saved structure (`[model] structure`, `--model`)."""
 
 import json
-import math
 import shutil
 
-import numpy as np
 import pytest
 
-import hdjax
 from hdjax.cli import main
-from hdjax.discover import DiscoverOptions, calibrate_baseline, fallback_tables
-from hdjax.discover._start import collinear_families
+from hdjax.discover import fallback_tables
 
 from .conftest import REPO
-from .discover_data import JOINT, RATIO, _hinge
 
 EXAMPLES = REPO / "docs" / "examples"
 
@@ -67,45 +62,6 @@ def test_fallback_tables_simplify_in_the_documented_order():
     # a step that changes nothing is not tried twice
     plain = {"poly_order": 0, "kinematic": "none", "fourier_order": 0, "per_segment": False}
     assert fallback_tables(plain) == [plain]
-    # a failure that names the kinematic term alone drops it before the current polynomial
-    shared = {**table, "per_segment": False}
-    assert fallback_tables(table, frozenset({"kinematic"})) == [
-        table,
-        shared,
-        {**shared, "kinematic": "none", "fourier_order": 0},
-        {**shared, "poly_order": 0},
-        {**shared, "poly_order": 0, "kinematic": "none", "fourier_order": 0},
-    ]
-    assert fallback_tables(table, frozenset({"kinematic", "poly"})) == chain
-
-
-def test_a_motion_too_short_for_the_kinematic_term_keeps_the_current_polynomial():
-    # the motor turns through 2 rad: the kinematic term's Fourier columns of theta_m are
-    # collinear, the current polynomial is not. The start drops the kinematic term only;
-    # before, it dropped the polynomial first and then both, and the loop found the twist's
-    # cubic in the current again as stiffening (a clean joint's false discovery)
-    rng = np.random.default_rng(4)
-    n = 3000
-    t = np.arange(n) * 1e-3
-    torque = 300 * np.sin(2 * math.pi * 0.7 * t) + 60 * np.sin(2 * math.pi * 2.3 * t + 1)
-    # the motor's own torque (inertia, friction) makes the current differ from the reference
-    current = (torque + 40 * np.sin(2 * math.pi * 3.1 * t)) / (RATIO * 0.1)
-    twist = _hinge(torque) + 2e-4 * (current / 25) + 3e-5 * (current / 25) ** 3
-    theta_l = 0.006 * np.sin(2 * math.pi * 0.9 * t)
-    theta_m = RATIO * (theta_l - twist) + 1e-7 * rng.standard_normal(n)
-    rec = hdjax.make_recording(t, theta_m, theta_l, current, torque, source="short motion")
-    options = DiscoverOptions(current_scale=25.0)
-    table = {"poly_order": options.poly_order, "kinematic": "paper", "per_segment": False}
-    notes = []
-    model = calibrate_baseline(rec, JOINT, options, notes)
-    assert any("collinear terms" in n and "a1" in n for n in notes), notes
-    assert notes[-1] == 'starting model fell back to kinematic = "none", fourier_order = 0'
-    assert sum(name.startswith("w") for name in model.term_names) == options.poly_order
-    # the families are found from the terms each adds, not from their names' letters
-    kw = {**table, "n_segments": 5, "fourier_order": 3}
-    assert collinear_families(kw, [["k0", "a1", "b2"]], JOINT, 25.0) == {"kinematic"}
-    assert collinear_families(kw, [["k1", "w2"], ["d3"]], JOINT, 25.0) == {"kinematic", "poly"}
-    assert collinear_families(kw, [["k0", "k1"]], JOINT, 25.0) == frozenset()
 
 
 def test_run_model_calibrates_a_saved_structure(example, tmp_path, capsys):

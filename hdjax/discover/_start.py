@@ -34,47 +34,20 @@ def structure_table(table: Mapping) -> dict:
     return {k: table[k] for k in STRUCTURE_KEYS if k in table}
 
 
-def fallback_tables(table: Mapping, named: frozenset[str] = frozenset()) -> list[dict]:
+def fallback_tables(table: Mapping) -> list[dict]:
     """The structures tried in turn when a calibration fails: `table`'s own, then with shared
     coefficients (`per_segment = false`), then without the current polynomial
-    (`poly_order = 0`), then without the kinematic-error term as well (`kinematic = "none"`);
-    each one only once.
-
-    `named`: the term families a failed calibration named as collinear (`"poly"`,
-    `"kinematic"`, see [`collinear_families`][]). When it names the kinematic-error term and
-    not the current polynomial, the structure without the kinematic term (the polynomial
-    kept) is tried before the polynomial is dropped: a motion too short for the Fourier terms
-    of the angles leaves the current polynomial identifiable, and dropping it made the loop
-    find its shape again as another effect."""
+    (`poly_order = 0`), then without the kinematic-error term (`kinematic = "none"`); each
+    one only once."""
     first = structure_table(table)
-    shared = {**first, "per_segment": False}
-    no_poly = {**shared, "poly_order": 0}
-    no_kinematic = {**shared, "kinematic": "none", "fourier_order": 0}
-    neither = {**no_poly, "kinematic": "none", "fourier_order": 0}
-    singles = [no_kinematic, no_poly] if named == {"kinematic"} else [no_poly]
+    chain = [first, {**first, "per_segment": False}]
+    chain.append({**chain[-1], "poly_order": 0})
+    chain.append({**chain[-1], "kinematic": "none", "fourier_order": 0})
     out: list[dict] = []
-    for kw in [first, shared, *singles, neither]:
+    for kw in chain:
         if kw not in out:
             out.append(kw)
     return out
-
-
-def collinear_families(kw: Mapping, collinear, joint: Joint, scale: float) -> frozenset[str]:
-    """The families of the structure `kw` (`"poly"`: the current polynomial, `"kinematic"`:
-    the kinematic-error term) that own a term of the collinear groups `collinear` (term
-    names, as a rank-deficient calibration reports them), found from the terms each family
-    adds to the model."""
-    names = {t for group in collinear for t in group}
-    terms = set(paper_model(kw, joint, scale).term_names)
-    without = {
-        "poly": {**kw, "poly_order": 0},
-        "kinematic": {**kw, "kinematic": "none", "fourier_order": 0},
-    }
-    return frozenset(
-        family
-        for family, other in without.items()
-        if names & (terms - set(paper_model(other, joint, scale).term_names))
-    )
 
 
 def toml_settings(kw: Mapping) -> str:
@@ -111,8 +84,7 @@ def calibrate_start(
     neighbour ([`hdjax.compliance.merge_sparse_segments`][]); after it, every outer segment
     the constraint holds at its floor is merged too and the model refitted. When the design is
     rank-deficient on the data (e.g. a current that is the reference torque itself), the
-    structures of `fallback_tables` are tried in turn, the families the failure names as
-    collinear dropped first. Every merge and fallback is said in
+    structures of `fallback_tables` are tried in turn. Every merge and fallback is said in
     `notes`. `rows`: the rows of `pair` that are TRAIN (default all); `chunk`: the fits
     accumulated over chunks of that many samples.
 
@@ -125,27 +97,22 @@ def calibrate_start(
     torque = np.asarray(pair[1])
     torque = torque if rows is None else torque[rows]
     last = first = None
-    tried: list[dict] = []
-    named: frozenset[str] = frozenset()
-    while todo := [kw for kw in fallback_tables(table, named) if kw not in tried]:
-        kw = todo[0]
-        tried.append(kw)
+    tables = fallback_tables(table)
+    for i, kw in enumerate(tables):
         model, merged = merge_sparse_segments(paper_model(kw, joint, scale), torque)
         trial = list(merged)
         try:
             res = fit_merging(model, pair, trial, chunk=chunk, rows=rows, throw=False)
             first = res if first is None else first
             if not res.ok:
-                if res.stats.get("collinear"):
-                    named = collinear_families(kw, res.stats["collinear"], joint, scale)
                 raise CalibrationError(failure_message(res))
         except (CalibrationError, InversionError) as err:
             last = err
             notes.append(f"starting model ({toml_settings(kw)}) not calibrated: {err}")
             continue
         notes.extend(trial)
-        if len(tried) > 1:
-            changed = {k: v for k, v in kw.items() if tried[0].get(k) != v}
+        if i:
+            changed = {k: v for k, v in kw.items() if tables[0].get(k) != v}
             notes.append(f"starting model fell back to {toml_settings(changed)}")
         return res
     if not throw and first is not None:
