@@ -11,7 +11,7 @@ import hdjax
 from hdjax._lazy import dask_distributed
 from hdjax._metrics import error_metrics
 from hdjax.cli import main
-from hdjax.cli._fleet import WORKER_ENV
+from hdjax.cli._fleet import WORKER_ENV, worker_env
 from hdjax.compliance import ComplianceModel, calibrate_lstsq, estimate_torque
 from hdjax.config import save_model, synthetic_recording
 
@@ -97,7 +97,7 @@ def test_fleet_two_workers_one_broken_and_resume(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def scheduler():
     cluster = distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, env=WORKER_ENV
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, env=worker_env()
     )
     with distributed.Client(cluster) as client:
         pids = set(client.run(os.getpid).values())
@@ -346,5 +346,17 @@ def test_fleet_pins_the_local_workers_unless_no_pin(tmp_path, scheduler, monkeyp
     assert [(c["n_workers"], c["threads_per_worker"], c["processes"]) for c in clusters] == [
         (2, 1, True), (2, 1, True)
     ]  # fmt: skip
-    assert all(c["env"] == WORKER_ENV for c in clusters)
+    assert all(c["env"] == worker_env() for c in clusters)
+    # the caller's own XLA flags reach the workers, with the single-thread flag once
+    monkeypatch.setenv("XLA_FLAGS", "--xla_backend_optimization_level=0")
+    env = worker_env()
+    assert env["XLA_FLAGS"].split() == [
+        "--xla_backend_optimization_level=0",
+        *WORKER_ENV["XLA_FLAGS"].split(),
+    ]
+    assert {k: v for k, v in env.items() if k != "XLA_FLAGS"} == {
+        k: v for k, v in WORKER_ENV.items() if k != "XLA_FLAGS"
+    }
+    monkeypatch.setenv("XLA_FLAGS", env["XLA_FLAGS"])
+    assert worker_env() == env
     assert pinned == [address]  # by default only, not with --no-pin

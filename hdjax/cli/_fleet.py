@@ -44,6 +44,14 @@ WORKER_ENV = {
 }
 
 
+def worker_env() -> dict[str, str]:
+    """The local workers' environment: `WORKER_ENV`, its XLA flag appended to the caller's own
+    `XLA_FLAGS` (which the workers would otherwise lose, and compile differently)."""
+    own = os.environ.get("XLA_FLAGS", "").split()
+    flags = own + [f for f in WORKER_ENV["XLA_FLAGS"].split() if f not in own]
+    return {**WORKER_ENV, "XLA_FLAGS": " ".join(flags)}
+
+
 CONNECT_TIMEOUT = 20.0
 
 # a scheduler address: [scheme://]host:port, with Dask's comm schemes
@@ -151,7 +159,7 @@ def _client(args, n_tasks: int):
         processes=True,
         dashboard_address=None,
         silence_logs=logging.ERROR,
-        env=WORKER_ENV,
+        env=worker_env(),
     )
     client = Client(cluster)
     if not args.no_pin:
