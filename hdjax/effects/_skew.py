@@ -48,7 +48,7 @@ from .._features import Signals
 from ._base import AbstractFamily, AbstractTorqueFreeTerm, Candidate, CandidateContext
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import fmt, hyper, rounded
-from ._traced import opaque
+from ._traced import opaque_in
 
 BACK_SAMPLES = 16
 """How many samples back the delayed encoder value is searched (a delay of up to this many
@@ -127,9 +127,7 @@ class EncoderSkew(AbstractTorqueFreeTerm):
         # written for a delay that is a traced value too (a compiled column program serves
         # every delay, see `split_hypers`): both encoders' angles, the later one selected;
         # constants made opaque round as traced values do
-        delay, ratio, sign = self.delay, self.ratio, self.sign
-        if xp is jnp:
-            delay, ratio, sign = opaque(delay), opaque(ratio), opaque(sign)
+        delay, ratio, sign = opaque_in(xp, self.delay, self.ratio, self.sign)
         d = xp.abs(delay)
         t = xp.asarray(sig.t)
         x = xp.where(delay > 0, xp.asarray(sig.theta_l), xp.asarray(sig.theta_m) / ratio)
