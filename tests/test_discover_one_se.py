@@ -1,7 +1,9 @@
-"""The torque-domain choice among screened candidates: the one-standard-error rule.
+"""The torque-domain choice among screened candidates, and the gate at the end of the loop's
+path: the one-standard-error rule.
 
 Candidates whose cross-validated torque errors the held-out blocks cannot tell apart are
-chosen by parsimony (fewest columns). The standard error of the difference is taken pairwise
+chosen by parsimony (fewest columns); a path whose final model the held-out blocks cannot tell
+from the starting model is taken back. The standard error of the difference is taken pairwise
 over the held-out blocks; the cases below have it in closed form.
 """
 
@@ -9,7 +11,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from hdjax.discover._decision import Trial, choose
+from hdjax.discover._decision import Trial, beats_start, choose, taken_back_note
 from hdjax.discover._options import DiscoverOptions
 from hdjax.discover._pipeline import CrossValidation, within_one_se
 
@@ -70,3 +72,24 @@ def test_the_simpler_of_two_indistinguishable_candidates_is_chosen():
     assert choose([rich, near], current, BLOCKS, opts, []).key == "harmonic"
     # and when not even the lowest does, none is chosen: the loop stops
     assert choose([rich, near], _cv(np.full(BLOCKS.size, 1.0)), BLOCKS, opts, []) is None
+
+
+def test_a_path_the_held_out_blocks_cannot_tell_from_the_start_is_taken_back():
+    ones = _cv(np.ones(BLOCKS.size))
+    near, far = _cv(_shifted(0.3, 1.0)), _cv(_shifted(0.4, 1.0))  # 30 <= 33.3 < 40
+    assert not beats_start([near, ones], BLOCKS)  # one step within noise: taken back
+    assert beats_start([far, ones], BLOCKS)
+    # two steps: the whole path is tested, not its last step; block differences to the final
+    # model 10 (0.6 ± 2): a sum of 60 within 66.7, so both steps go back
+    assert not beats_start([_cv(1.6 + 2.0 * (-1.0) ** BLOCKS), near, ones], BLOCKS)
+    # a confirmed path keeps a weak last step (near -> ones alone would be within)
+    assert beats_start([_cv(np.full(BLOCKS.size, 4.0)), near, ones], BLOCKS)
+    assert beats_start([ones], BLOCKS)  # no step, nothing to take back
+
+
+def test_the_taken_back_note_names_the_steps_and_their_errors():
+    steps = [SimpleNamespace(key=k) for k in ("harmonic:theta_l:2", "stiffness:torque")]
+    path = [_cv(np.full(BLOCKS.size, 4.0)), _cv(_shifted(0.3, 1.0)), _cv(np.ones(BLOCKS.size))]
+    note = taken_back_note(steps, path)
+    assert note.startswith("taken back: harmonic:theta_l:2, stiffness:torque. ")
+    assert "(after each step: 2 -> 1.14 -> 1 N·m)" in note

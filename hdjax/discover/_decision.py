@@ -214,6 +214,38 @@ def choose(
     return best
 
 
+def beats_start(path: list[CrossValidation], blocks: np.ndarray) -> bool:
+    """Whether the loop's path as a whole beats the starting model: the final model's
+    cross-validated torque error lies beyond one standard error below the starting model's
+    ([`hdjax.discover._pipeline.within_one_se`][], paired over the held-out `blocks`; the
+    one-standard-error rule of Hastie, Tibshirani & Friedman, *The Elements of Statistical
+    Learning*, Section 7.10).
+
+    `path[i]` is the cross-validation of the model after `i` effects, `path[0]` the starting
+    model's. The test of the whole path comes before the single steps (a protected procedure,
+    as Fisher's least significant difference follows the overall test): on a joint without an
+    undeclared effect, a step of a few percent that the held-out blocks cannot confirm is the
+    typical false discovery, and it is refused; once the path is confirmed, a weak step after
+    a strong one is judged by `min_torque_gain` alone, which keeps true small effects. A path
+    without steps beats nothing and keeps nothing: `True`.
+    """
+    return len(path) < 2 or not within_one_se(path[0], path[-1], blocks)
+
+
+def taken_back_note(steps, path: list[CrossValidation]) -> str:
+    """The note of a path that [`beats_start`][] refuses: which steps are taken back and why,
+    and what the user can do next."""
+    keys = ", ".join(s.key for s in steps)
+    errors = " -> ".join(f"{c.torque_rms:.4g}" for c in path)
+    return (
+        f"taken back: {keys}. The final model's cross-validated torque error lies within one "
+        f"standard error of the starting model's (after each step: {errors} N·m), paired over "
+        "the held-out blocks: TRAIN cannot confirm that the joint has an effect the starting "
+        "model lacks, so the starting model is kept (the one-standard-error rule). A longer "
+        "TRAIN record (more held-out blocks) can confirm a small effect"
+    )
+
+
 VELOCITY_KEYS = ("skew:encoders", "viscous:omega_l", "viscous:omega_m")
 """Keys whose columns are, to first order, the same speed: an encoder time skew and viscous
 friction (the twist cannot tell them apart; the current may)."""

@@ -27,7 +27,12 @@
    share of a column's variance the model's columns do not span,
    [`hdjax.discover._aliases.determination`][]). An accepted step never raises it. Stop
    when none does, or after `max_effects` effects.
-6. Refit on all of TRAIN, estimate torque on TEST and record the errors. TEST is never used
+6. **The gate.** If the final model's cross-validated torque error lies within one standard
+   error of the starting model's (paired over the held-out blocks), every step is taken back:
+   the run claims no effect the starting model lacks. The whole path is tested first, the
+   single steps after it (a protected procedure), so a joint without an undeclared effect
+   rarely gets one, and a weak step after a confirmed one keeps its chance.
+7. Refit on all of TRAIN, estimate torque on TEST and record the errors. TEST is never used
    to choose. At the end every added effect's amplitude gets a 95 % moving-block bootstrap
    interval over TRAIN ([`hdjax.discover._uncertainty`][]), and structure the final model
    leaves above the noise is listed as `unexplained`.
@@ -60,6 +65,7 @@ from ._closing import (
 )
 from ._decision import (
     Trial,
+    beats_start,
     choose,
     eligible,
     no_step_note,
@@ -67,6 +73,7 @@ from ._decision import (
     rank,
     ranking_rows,
     speed_reading,
+    taken_back_note,
 )
 from ._folds import MEMORY_GAP, FoldPlan, fold_plan
 from ._options import DiscoverOptions as DiscoverOptions, stopping_rule
@@ -348,13 +355,16 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
 def _add_effects(run: _Run, model, est_train, cv):
     """The loop proper: score the library, shortlist, try, choose and add one effect per
     step until the stopping rule ([`hdjax.discover._decision.choose`][]) or `max_effects`
-    stops it.
+    stops it; then every step is taken back unless the path as a whole beats the starting
+    model beyond one standard error ([`hdjax.discover._decision.beats_start`][]).
 
     **Returns:** `(steps, model, TRAIN estimate, cross-validation, spectra, residual,
     ranking)` after the last step.
     """
     data, plan, options, notes = run.data, run.plan, run.options, run.notes
     steps: list[DiscoveryStep] = []
+    start: tuple = ()  # the starting model's state, kept after its scoring
+    path = [cv]  # the cross-validation after each step, the starting model's first
     while True:
         scored, spectra, resid = score_candidates(
             model,
@@ -370,6 +380,8 @@ def _add_effects(run: _Run, model, est_train, cv):
         )
         ranked = rank(scored, options.min_gain)
         ranking = ranking_rows(ranked)
+        if not steps:
+            start = (model, est_train, cv, spectra, resid, ranking)
         if len(steps) >= options.max_effects:
             notes.append(f"stopped: reached max_effects = {options.max_effects}")
             break
@@ -404,7 +416,12 @@ def _add_effects(run: _Run, model, est_train, cv):
         step = _step(run, best, model, est_train, ranked, ranking, spectra)
         model, est_train, cv = best.model, best.estimate, best.cv
         steps.append(step)
+        path.append(cv)
         _say_step(steps, run.base_metrics, run.say, notes)
+    if not beats_start(path, plan.blocks_rec):
+        notes.append(taken_back_note(steps, path))
+        run.say(notes[-1])
+        return [], *start
     return steps, model, est_train, cv, spectra, resid, ranking
 
 

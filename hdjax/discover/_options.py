@@ -60,5 +60,6 @@ def stopping_rule(options: DiscoverOptions) -> str:
         "then the lowest is added, where of errors closer than min_torque_gain one seriously "
         "collinear with the model's columns (variance inflation over 10) gives way to one TRAIN "
         "determines more than twice as well; stop when none qualifies, or after "
-        f"{o.max_effects} effects (max_effects)"
+        f"{o.max_effects} effects (max_effects); then, if the final model's error lies within "
+        "one standard error of the starting model's, every step is taken back"
     )
