@@ -119,6 +119,23 @@ TARGETS: dict[str, list[tuple[str, str, str, str]]] = {
             "≤ {target_seconds} s",
         ),
     ],
+    "bench_discover_select.py": [
+        (
+            "target_met",
+            "`hdjax discover --chunk {chunk} --select-samples {select_samples}`, {train_samples} "
+            "TRAIN samples from Parquet, cold process",
+            "{wall_s} s, peak {peak_rss_gb} GB",
+            "≤ {target_seconds} s and ≤ {target_peak_rss_gb} GB",
+        ),
+        (
+            "cost/same_effects",
+            "what the selection costs: {cost/select_samples} of {cost/train_samples} TRAIN "
+            "samples against the full in-memory run",
+            "same effects: {cost/same_effects}; final TEST RMS {cost/test_rms_over_full}× the "
+            "full run's; 95 % interval widths {cost/interval_width_over_full} the full run's",
+            "the same effects",
+        ),
+    ],
     "bench_fleet.py": [
         (
             "target_met",

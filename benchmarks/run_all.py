@@ -44,6 +44,14 @@ QUICK = {
     "bench_network.py": ["--n-train", "2000", "--epochs", "50"],
     "compare_methods.py": ["--duration", "10", "--steps", "300"],
     "bench_discover_long.py": ["--samples", "100000", "--scale", "25000,50000"],
+    "bench_discover_select.py": [
+        "--samples",
+        "1000000",
+        "--select",
+        "100000",
+        "--reference-samples",
+        "200000",
+    ],  # fmt: skip
     "bench_fleet.py": ["--samples", "5000", "--logs", "4"],
     "bench_stream_parquet.py": ["--samples", "4000000", "--reference-samples", "500000"],
     "bench_warm_start.py": ["--samples", "20000"],

@@ -33,10 +33,15 @@ from ..discover.internal import (
     discover_options,
     experiment_toml,
     load_discover_config,
+    load_selection,
+    refit_on_whole_log,
     write_report_into,
 )
 from ..report import ResultDir
 from ._common import Parser
+
+MIN_SELECT = 10_000
+"""The fewest samples `--select-samples` takes."""
 
 DEFAULTS = DiscoverOptions()
 """The command line's defaults are the loop's own."""
@@ -126,6 +131,16 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
         "record at once (default: the discover file's [discover] chunk, else 0)",
     )
     p.add_argument(
+        "--select-samples",
+        type=int,
+        default=None,
+        metavar="M",
+        help="with --chunk, for a --train log longer than memory allows: choose the effects on "
+        "M of its samples (20 whole blocks, one centred in each twentieth of the log), then "
+        "calibrate the starting and the final model on every row, streamed; memory then grows "
+        "with M, not with the log (default: all of TRAIN)",
+    )
+    p.add_argument(
         "--ignore-column",
         action="append",
         default=[],
@@ -154,11 +169,34 @@ def run(args: argparse.Namespace) -> int:
         inputs += _config_inputs(args.config)
     if args.chunk is not None:
         check_chunk(args.chunk, "--chunk")
+    if args.select_samples is not None:
+        _check_select(args)
     # the memory guard counts whole-file parsing even with --chunk: the loop itself needs about
     # as much per sample as a parse (measured), so the guard stays conservative
-    check_read_memory(inputs[:2] + inputs[4:], fix="give shorter --train and --test logs")
+    # a selection sample reads --train chunk by chunk and keeps M rows: the guard leaves it out
+    whole = inputs[1:2] if args.select_samples else inputs[:2]
+    check_read_memory(
+        whole + inputs[4:],
+        fix="give shorter --train and --test logs, or --chunk N --select-samples M",
+    )
     with ResultDir(out, overwrite=args.overwrite, inputs=inputs, command="discover") as rd:
         return _run_into(rd, args)
+
+
+def _check_select(args) -> None:
+    m = args.select_samples
+    if m < MIN_SELECT:
+        raise DataError(
+            f"--select-samples must be at least {MIN_SELECT} (the loop's folds need whole "
+            f"blocks of its samples), got {m}"
+        )
+    if args.config is not None:
+        raise DataError("--select-samples works with --train/--test/--joint, not --config")
+    if not args.chunk:
+        raise DataError(
+            "--select-samples needs --chunk N: the final calibration streams over the whole "
+            "--train log N rows at a time"
+        )
 
 
 def _experiment(args, joint, context_split: bool) -> tuple[str, str]:
@@ -193,7 +231,7 @@ def _config_inputs(path: Path) -> list[Path]:
 
 
 def _run_into(rd, args: argparse.Namespace) -> int:
-    cfg_notes, cfg, context = [], {}, None
+    cfg_notes, cfg, context, selection = [], {}, None, {}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if args.config is not None:
@@ -204,7 +242,10 @@ def _run_into(rd, args: argparse.Namespace) -> int:
             joint = load_joint(args.joint)
             # every log format, by suffix, through the loader the other commands use; with
             # --chunk parsed chunk by chunk (the parser's memory bounded by the chunk)
-            train = load_recording(args.train, chunk=args.chunk or None)
+            if args.select_samples:
+                train, selection = load_selection(args.train, args.select_samples, args.chunk)
+            else:
+                train = load_recording(args.train, chunk=args.chunk or None)
             test = load_recording(args.test, chunk=args.chunk or None)
             cfg_notes = ["reference: the 'torque' column of the --train and --test files"]
     say = (lambda s: None) if args.quiet else (lambda s: print(f"[discover] {s}", file=sys.stderr))
@@ -232,6 +273,12 @@ def _run_into(rd, args: argparse.Namespace) -> int:
     context = context if not options.chunk else None
     result = loop.discover(train, test, joint, options, progress=say, context=context)
     result.aux.notes[:0] = cfg_notes + notes + [f"input warning: {w.message}" for w in caught]
+    if selection:
+        say(
+            f"calibrating the starting and the final model on all {selection['samples_total']} "
+            "TRAIN samples (streamed)"
+        )
+        result = refit_on_whole_log(result, args.train, test, joint, args.chunk, selection)
     say("writing report" + ("" if args.no_figures else " and figures"))
     experiment, missing = _experiment(args, joint, context_split)
     write_report_into(

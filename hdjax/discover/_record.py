@@ -67,6 +67,10 @@ class DiscoveryRecord:
     stopping_rule: str = ""
     """The rule the loop stopped by, in words, with its settings
     (see `DiscoverOptions`)."""
+    selection: dict = dataclasses.field(default_factory=dict)
+    """With a selection sample of a long TRAIN log (`hdjax discover --select-samples`): its
+    rows and blocks, and whether the model written was calibrated on the whole log; else
+    `{}`."""
 
     @property
     def effects(self) -> list[str]:

@@ -63,6 +63,7 @@ def report_dict(solution: Solution, *, extra: dict | None = None) -> dict:
         "effects": result.effects,
         "vocabulary": effects.vocabulary(),
         "stopping_rule": result.stopping_rule or stopping_rule(DiscoverOptions()),
+        **({"selection": result.selection} if result.selection else {}),
         "last_ranking": result.final_ranking,
         "unexplained": result.unexplained,
         "cv_block_samples": result.cv_block_samples,
