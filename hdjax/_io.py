@@ -364,7 +364,7 @@ def no_source_error(source, spec: ColumnSpec, name: str, available) -> DataError
     )
 
 
-def _build(
+def table_recording(
     table: Mapping[str, np.ndarray], columns: ColumnMap | None, source: str, check_units: bool
 ) -> Recording:
     columns = columns or ColumnMap()
@@ -411,7 +411,7 @@ def load_csv(
     path = Path(path)
     header, body = _read_csv_table(path, None if columns is None else columns.encoding)
     table = {name: body[:, j] for j, name in enumerate(header)}
-    return _build(table, columns, str(path), check_units)
+    return table_recording(table, columns, str(path), check_units)
 
 
 def load_npz(
@@ -430,7 +430,7 @@ def load_npz(
         raise DataError(f"{path}: not a readable .npz archive ({err})") from None
     if not table:
         raise DataError(f"{path}: the archive is empty")
-    return _build(table, columns, str(path), check_units)
+    return table_recording(table, columns, str(path), check_units)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -13,10 +13,10 @@ from ._errors import ConfigError
 
 # Bytes per sample, beyond the design matrix: the recording, its signals and velocities, the
 # estimate and its error (about 40 float64 arrays of the recording's length).
-_BYTES_PER_SAMPLE = 40 * 8
+BYTES_PER_SAMPLE = 40 * 8
 # A CSV file read whole holds its text and one Python string per cell: about ten times the
 # file's size.
-_CSV_FACTOR = 10
+CSV_FACTOR = 10
 
 
 def available_memory() -> int | None:
@@ -34,7 +34,7 @@ def available_memory() -> int | None:
         return None
 
 
-def _size(n: float) -> str:
+def size_text(n: float) -> str:
     for unit in ("bytes", "KB", "MB", "GB", "TB", "PB"):
         if n < 1000 or unit == "PB":
             return f"{n:.3g} {unit}"
@@ -55,11 +55,12 @@ def check_memory(n_bytes: float, what: str, fix: str, *, free: int | None = None
     free = available_memory() if free is None else free
     if free is not None and n_bytes > free:
         raise ConfigError(
-            f"{what} needs about {_size(n_bytes)} of memory but only {_size(free)} is free; {fix}"
+            f"{what} needs about {size_text(n_bytes)} of memory but only {size_text(free)} is "
+            f"free; {fix}"
         )
 
 
-def _stat(p: Path) -> int:
+def file_size(p: Path) -> int:
     try:
         return p.expanduser().stat().st_size
     except OSError:
@@ -77,13 +78,13 @@ def check_read_memory(paths, *, fix: str, free: int | None = None) -> None:
     - `free`: the free memory in bytes (default `available_memory`).
     """
     files = [Path(p) for p in paths if p is not None]
-    sizes = [_stat(p) for p in files]
+    sizes = [file_size(p) for p in files]
     need = 0.0
     for p, size in zip(files, sizes):
         text = p.suffix.lower() == ".csv"
         # about 60 bytes per CSV row; a binary log at least 40 (5 float64 columns)
         per_row = 60.0 if text else 40.0
-        need += size * (_CSV_FACTOR if text else 1) + size / per_row * _BYTES_PER_SAMPLE
+        need += size * (CSV_FACTOR if text else 1) + size / per_row * BYTES_PER_SAMPLE
     if need:
         names = ", ".join(str(p) for p, n in zip(files, sizes) if n)
-        check_memory(need, f"reading {names} ({_size(sum(sizes))})", fix, free=free)
+        check_memory(need, f"reading {names} ({size_text(sum(sizes))})", fix, free=free)

@@ -25,10 +25,11 @@ import numpy as np
 
 from .._custom_types import PathLike
 from .._errors import DataError
-from .._io import ColumnMap, _build, load_csv, load_npz
+from .._io import ColumnMap, load_csv, load_npz, table_recording
 from .._recording import Recording, make_recording
 from ._columns import as_float_column as as_float_column, require as require
 from ._mapper import ChunkMapper, needed_sources
+from ._parquet import ParquetWriter as ParquetWriter  # pyarrow is imported on first use
 
 SUFFIXES = {
     ".csv": "_csv",
@@ -60,7 +61,7 @@ def _text(mod, columns) -> dict:
     return {"encoding": getattr(columns, "encoding", None)} if getattr(mod, "TEXT", False) else {}
 
 
-def _check_exists(path: Path) -> None:
+def check_exists(path: Path) -> None:
     if not path.exists():
         raise DataError(f"{path}: no such file")
     if path.stat().st_size == 0:
@@ -80,11 +81,11 @@ def load(path, columns=None, *, check_units: bool = True):
     """
     path = Path(path)
     mod = reader(path)
-    _check_exists(path)
+    check_exists(path)
     kw = _text(mod, columns)
     names = needed_sources(columns, mod.column_names(path, **kw), str(path), mod)
     table = mod.read_table(path, names, **kw)
-    return _build(table, columns, str(path), check_units)
+    return table_recording(table, columns, str(path), check_units)
 
 
 def iter_recordings(path, columns=None, *, chunk: int, check_units: bool = True) -> Iterator:
@@ -99,7 +100,7 @@ def iter_recordings(path, columns=None, *, chunk: int, check_units: bool = True)
         raise DataError(f"chunk must be an integer >= 2 samples, got {chunk!r}")
     path = Path(path)
     mod = reader(path)
-    _check_exists(path)
+    check_exists(path)
     kw = _text(mod, columns)
     available = mod.column_names(path, **kw)
     names = needed_sources(columns, available, str(path), mod)

@@ -5,8 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .._errors import ConfigError, DataError
-from .._formats import _check_exists, iter_recordings, reader
-from .._formats._parquet import ParquetWriter
+from .._formats import ParquetWriter, check_exists, iter_recordings, reader
 from ..report import check_output_file
 from ._common import Progress, add_command, add_flag, add_quiet, read_column_map as read_column_map
 
@@ -49,7 +48,7 @@ def convert(src, dst, columns=None, *, chunk: int = 1 << 20, progress=None) -> i
         raise ConfigError(f"{dst}: the output would replace the input; choose another name")
     if chunk < 2:
         raise ConfigError(f"--chunk must be >= 2 rows, got {chunk}")
-    _check_exists(src)
+    check_exists(src)
     if columns is None:
         mod = reader(src)
         tables = mod.iter_tables(src, chunk, None)

@@ -13,13 +13,13 @@ from pathlib import Path
 from .._custom_types import PathLike
 from .._errors import ConfigError, HdjaxError, ModelMismatchError
 from .._memory import (  # noqa: F401 - re-exported: the checks' historical home
-    _BYTES_PER_SAMPLE,
-    _CSV_FACTOR,
-    _size,
-    _stat,
+    BYTES_PER_SAMPLE,
+    CSV_FACTOR,
     available_memory,
     check_memory,
     check_read_memory,
+    file_size,
+    size_text,
 )
 from ._saved_model import ratio_mismatch
 from ._schema import joint_of, model_of
@@ -46,19 +46,19 @@ def _n_samples(cfg: dict, base_dir: Path | None) -> tuple[float, str, str, float
     data = cfg["data"]
     if data["kind"] == "synthetic":
         n = data["n_samples"]
-        return n, f"[data] n_samples = {n}", "use fewer samples", 2.0 * n * _BYTES_PER_SAMPLE
+        return n, f"[data] n_samples = {n}", "use fewer samples", 2.0 * n * BYTES_PER_SAMPLE
     if data["kind"] == "plant":
         per = data["duration"] / _PLANT_DT
         n = per * len(data["scenarios"])
         what = f"[data] duration = {data['duration']:g} s ({len(data['scenarios'])} scenarios)"
-        return n, what, "use a shorter duration", 2.0 * n * _BYTES_PER_SAMPLE
-    at = lambda name: _stat(Path(name) if base_dir is None else base_dir / Path(name))
+        return n, what, "use a shorter duration", 2.0 * n * BYTES_PER_SAMPLE
+    at = lambda name: file_size(Path(name) if base_dir is None else base_dir / Path(name))
     tests = data["test"]
     tests = list(tests.values()) if isinstance(tests, dict) else list(tests)
     train_bytes = sum(at(n) for n in data["train"])
     total = train_bytes + sum(at(n) for n in tests)
     n = train_bytes / 60.0  # at least about 60 bytes per CSV row (6 columns of 10 characters)
-    return n, "the data files", "read a shorter part of the log", _CSV_FACTOR * total
+    return n, "the data files", "read a shorter part of the log", CSV_FACTOR * total
 
 
 def preflight(cfg: dict, *, base_dir: PathLike | None = None, where: str = "config") -> None:
@@ -71,9 +71,9 @@ def preflight(cfg: dict, *, base_dir: PathLike | None = None, where: str = "conf
     n, what, fix, read_bytes = _n_samples(cfg, None if base_dir is None else Path(base_dir))
     fit = cfg["fit"]
     if fit["method"] == "rls":
-        design = fit["block"] * n_coef * 8 * _DESIGN_COPIES + n * _BYTES_PER_SAMPLE
+        design = fit["block"] * n_coef * 8 * _DESIGN_COPIES + n * BYTES_PER_SAMPLE
     else:
-        design = n * (n_coef * 8 * _DESIGN_COPIES + _BYTES_PER_SAMPLE)
+        design = n * (n_coef * 8 * _DESIGN_COPIES + BYTES_PER_SAMPLE)
     need = read_bytes + design
     if math.isfinite(need):
         check_memory(need, f"{where}: {what} with {n_coef} model terms", fix)
