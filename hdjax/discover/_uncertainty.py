@@ -218,23 +218,37 @@ def _col(d: np.ndarray, r: np.ndarray) -> np.ndarray:
     return d if r.ndim == 1 else d[:, None]
 
 
-def _two_stage(model, rows, inst, cols: np.ndarray) -> _FitRows:
+def _two_stage(model, rows, inst, cols: np.ndarray) -> _FitRows | _ArrayRows:
     """The first stage of two-stage least squares over row sources: the active columns' fits
-    on the active instrument columns (columns free of the reference torque are reproduced)."""
+    on the active instrument columns (columns free of the reference torque are reproduced).
+    Designs held in memory give the fitted design formed once (every later pass reads it),
+    and their active columns are taken once for both passes of the first stage."""
+    in_memory = isinstance(rows, _ArrayRows) and isinstance(inst, _ArrayRows)
+    if in_memory:
+        held = [(inst.a[:, cols], rows.a[:, cols])]
+        pairs = lambda: held  # noqa: E731
+    else:
+        pairs = lambda: (  # noqa: E731
+            (z[:, cols], a[:, cols])
+            for (_, _, a), (_, _, z) in zip(rows.designs(model), inst.designs(model))
+        )
     zz = zx = 0.0
-    for (_, _, a), (_, _, z) in zip(rows.designs(model), inst.designs(model)):
-        zc = z[:, cols]
+    for zc, ac in pairs():
         zz = zz + zc.T @ zc
-        zx = zx + zc.T @ a[:, cols]
+        zx = zx + zc.T @ ac
 
     def residual_pass(g):
         out = 0.0
-        for (_, _, a), (_, _, z) in zip(rows.designs(model), inst.designs(model)):
-            zc = z[:, cols]
-            out = out + zc.T @ (a[:, cols] - zc @ g)
+        for zc, ac in pairs():
+            out = out + zc.T @ (ac - zc @ g)
         return out
 
-    return _FitRows(rows, inst, cols, _csne(zz, zx, residual_pass))
+    gamma = _csne(zz, zx, residual_pass)
+    if not in_memory:
+        return _FitRows(rows, inst, cols, gamma)
+    fitted = np.array(rows.a, copy=True)  # as `_FitRows.designs` forms it, once
+    fitted[:, cols] = held.pop()[0] @ gamma
+    return _ArrayRows(fitted)
 
 
 def effect_intervals(
