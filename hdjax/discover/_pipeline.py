@@ -695,7 +695,8 @@ def cross_validate(
             c = chunks_of(sig, data.torque, chunk)
             rows = lambda: c.designs(model)  # noqa: E731
         else:
-            rows = one_block(design(model, sig, torque)[fit])
+            a = design(model, sig, torque)
+            rows = one_block(a if data.rows is None else a[fit])  # all rows: no copy
         return FoldSolver(
             rows,
             y[fit],

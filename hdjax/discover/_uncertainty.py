@@ -225,7 +225,7 @@ def _two_stage(model, rows, inst, cols: np.ndarray) -> _FitRows | _ArrayRows:
     and their active columns are taken once for both passes of the first stage."""
     in_memory = isinstance(rows, _ArrayRows) and isinstance(inst, _ArrayRows)
     if in_memory:
-        held = [(inst.a[:, cols], rows.a[:, cols])]
+        held = [(_columns(inst.a, cols), _columns(rows.a, cols))]
         pairs = lambda: held  # noqa: E731
     else:
         pairs = lambda: (  # noqa: E731
@@ -246,9 +246,20 @@ def _two_stage(model, rows, inst, cols: np.ndarray) -> _FitRows | _ArrayRows:
     gamma = _csne(zz, zx, residual_pass)
     if not in_memory:
         return _FitRows(rows, inst, cols, gamma)
+    fz = held.pop()[0] @ gamma
+    if cols.size == rows.a.shape[1]:  # every column fitted: the fits are the design
+        return _ArrayRows(fz)
     fitted = np.array(rows.a, copy=True)  # as `_FitRows.designs` forms it, once
-    fitted[:, cols] = held.pop()[0] @ gamma
+    fitted[:, cols] = fz
     return _ArrayRows(fitted)
+
+
+def _columns(x: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """`x[:, cols]`, without the copy when `cols` are all of `x`'s columns in order (read
+    only)."""
+    if cols.size == x.shape[1] and np.array_equal(cols, np.arange(x.shape[1])):
+        return x
+    return x[:, cols]
 
 
 def effect_intervals(
@@ -304,7 +315,8 @@ def effect_intervals(
     def residual_pass(w):
         out = 0.0
         for lo, hi, f in fit.designs(model):
-            out = out + f[:, cols].T @ (y[lo:hi] - f[:, cols] @ w)
+            fc = _columns(f, cols)
+            out = out + fc.T @ (y[lo:hi] - fc @ w)
         return out
 
     coef = np.zeros(p)
