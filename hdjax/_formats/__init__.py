@@ -159,12 +159,31 @@ def load_recording(
     return load(path, columns, check_units=check_units)
 
 
-def _joined(chunks: Iterator[Recording], check_units: bool) -> Recording:
+def _joined(chunks: Iterator[Recording], check_units: bool, keep=None) -> Recording:
     """One recording of consecutive chunks (units checked once, on the whole, as a whole-file
-    load does)."""
-    recs = list(chunks)  # iter_recordings yields at least one
-    parts = [rec.to_numpy() for rec in recs]
+    load does); with `keep(start, n)`, only the rows it selects (a mask per chunk)."""
+    parts, start, source = [], 0, None
+    for rec in chunks:  # iter_recordings yields at least one
+        cols, n = rec.to_numpy(), rec.n_samples
+        source = rec.source if source is None else source
+        if keep is not None:
+            mask = keep(start, n)
+            cols = {k: v[mask] for k, v in cols.items()}
+        start += n
+        parts.append(cols)
     whole = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
     core = [whole.pop(k) for k in ("t", "theta_m", "theta_l", "current")]
     torque = whole.pop("torque", None)
-    return make_recording(*core, torque, whole, source=recs[0].source, check_units=check_units)
+    return make_recording(*core, torque, whole, source=source, check_units=check_units)
+
+
+def load_rows(path: PathLike, keep, *, chunk: int, check_units: bool = True) -> Recording:
+    """The rows of a log that `keep(start, n)` selects (a boolean mask of the rows
+    `start .. start + n`), the file read `chunk` rows at a time: memory follows the rows
+    kept and the chunk, not the file."""
+    return _joined(iter_recordings(path, chunk=chunk, check_units=False), check_units, keep)
+
+
+def count_rows(path: PathLike, columns: ColumnMap | None = None, *, chunk: int) -> int:
+    """The number of data rows of a log, read `chunk` rows at a time."""
+    return sum(r.n_samples for r in iter_recordings(path, columns, chunk=chunk, check_units=False))

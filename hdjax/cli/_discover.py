@@ -29,6 +29,7 @@ from ..discover import (
     internal as loop,  # `loop.discover` looked up at call time, where a test stops it
 )
 from ..discover.internal import (
+    SELECT_BLOCKS,
     check_chunk,
     discover_options,
     experiment_toml,
@@ -136,7 +137,8 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
         default=None,
         metavar="M",
         help="with --chunk, for a --train log longer than memory allows: choose the effects on "
-        "M of its samples (20 whole blocks, one centred in each twentieth of the log), then "
+        f"M of its samples ({SELECT_BLOCKS} whole blocks, one centred in each of as many equal "
+        "parts of the log), then "
         "calibrate the starting and the final model on every row, streamed; memory then grows "
         "with M, not with the log (default: all of TRAIN)",
     )

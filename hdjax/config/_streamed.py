@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import ConfigError, DataError
-from .._formats import iter_recordings
+from .._formats import count_rows, iter_recordings
 from .._joint import Joint
 from ..compliance import RecordingStream
 from ..compliance.internal import recording_arrays, recording_from_arrays
@@ -184,10 +184,6 @@ def _joined(streams_: list[RecordingStream]) -> RecordingStream:
     return RecordingStream(lambda: (c for s in streams_ for c in s), label)
 
 
-def _count_rows(path, cmap, chunk, check_units) -> int:
-    return sum(r.n_samples for r in iter_recordings(path, cmap, chunk=chunk, check_units=False))
-
-
 def _keep_all(start, n):
     return np.ones(n, bool)
 
@@ -236,7 +232,7 @@ def build_streamed_dataset(exp, joint: Joint, say) -> StreamedDataset:
         path = _checked(resolve_path(exp, name), data["format"])
         say(f"reading {path} in chunks of {chunk} samples")
         if split > 0 and not data["test"]:
-            n = _count_rows(path, cmap, chunk, units)
+            n = count_rows(path, cmap, chunk=chunk)
             held = _held(n, split, block, str(path))
             a = _part_stream(path, cmap, chunk, units, lambda s, k: ~held(s, k), settle, str(path))
             b = _part_stream(path, cmap, chunk, units, held, settle, f"{path} (test)")

@@ -30,9 +30,9 @@ import dataclasses
 import numpy as np
 
 from .._errors import DataError, HdjaxError
-from .._formats import iter_recordings, load_recording
+from .._formats import count_rows, load_recording, load_rows
 from .._joint import Joint
-from .._recording import Recording, make_recording
+from .._recording import Recording
 from .._solution import Solution
 from ..compliance import RecordingStream, calibrate_stream
 from ._loop import _test_errors
@@ -58,40 +58,27 @@ def selection_blocks(n_total: int, n_keep: int) -> list[tuple[int, int]]:
     return [(s, s + length) for s in starts]
 
 
-def _count_rows(path, chunk: int) -> int:
-    return sum(r.n_samples for r in iter_recordings(path, chunk=chunk, check_units=False))
-
-
 def load_selection(path, n_keep: int, chunk: int) -> tuple[Recording, dict]:
     """TRAIN's selection sample ([`selection_blocks`][]), read `chunk` rows at a time: the rows
     kept as one [`hdjax.Recording`][], and a description of the selection (`{}` when the log
     holds no more than `n_keep` rows: then the whole log)."""
-    n_total = _count_rows(path, chunk)
+    n_total = count_rows(path, chunk=chunk)
     blocks = selection_blocks(n_total, n_keep)
     if len(blocks) == 1 and blocks[0] == (0, n_total):
         return load_recording(path, chunk=chunk), {}
     bounds = np.asarray(blocks)
-    parts: list[dict] = []
-    start = 0
-    for rec in iter_recordings(path, chunk=chunk, check_units=False):
-        n = rec.n_samples
+
+    def keep(start: int, n: int) -> np.ndarray:
         rows = np.arange(start, start + n)
         b = np.searchsorted(bounds[:, 0], rows, side="right") - 1
-        keep = (b >= 0) & (rows < bounds[np.maximum(b, 0), 1])
-        start += n
-        if keep.any():
-            cols = rec.to_numpy()
-            parts.append({k: v[keep] for k, v in cols.items()})
-    whole = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-    core = [whole.pop(k) for k in ("t", "theta_m", "theta_l", "current")]
-    torque = whole.pop("torque", None)
-    selected = make_recording(*core, torque, whole, source=str(path))
-    length = blocks[0][1] - blocks[0][0]
+        return (b >= 0) & (rows < bounds[np.maximum(b, 0), 1])
+
+    selected = load_rows(path, keep, chunk=chunk)
     return selected, dict(
         samples_total=n_total,
         samples_selected=selected.n_samples,
         blocks=len(blocks),
-        block_samples=length,
+        block_samples=blocks[0][1] - blocks[0][0],
     )
 
 

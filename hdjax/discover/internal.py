@@ -12,4 +12,8 @@ from ._config import (
 from ._experiment import experiment_toml as experiment_toml
 from ._loop import discover as discover
 from ._report import write_report_into as write_report_into
-from ._subsample import load_selection as load_selection, refit_on_whole_log as refit_on_whole_log
+from ._subsample import (
+    SELECT_BLOCKS as SELECT_BLOCKS,
+    load_selection as load_selection,
+    refit_on_whole_log as refit_on_whole_log,
+)
