@@ -71,7 +71,10 @@ def test_the_selection_holds_the_logs_own_rows(files):
 def test_the_model_written_is_calibrated_on_every_row_of_train(files, tmp_path):
     out = tmp_path / "out"
     argv = _argv(files, out, "--chunk", CHUNK, "--select-samples", SELECT)
+    inputs = {p: p.read_bytes() for p in files.iterdir()}
     assert main([str(a) for a in argv]) == 0
+    # the inputs are read, never written: byte-identical, none removed, none added beside them
+    assert {p: p.read_bytes() for p in files.iterdir()} == inputs
     rep = json.loads((out / "report.json").read_text())
     assert rep["selection"]["refit"] == "whole log"
     assert rep["selection"]["samples_total"] == N_TRAIN
