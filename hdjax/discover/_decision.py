@@ -20,6 +20,7 @@ import numpy as np
 
 from ..compliance import ComplianceModel
 from ..effects import current_viscous_slope, velocity_reading
+from ._library import VELOCITY_KEYS
 from ._options import DiscoverOptions, _percent
 from ._pipeline import CrossValidation, PipelineData, within_one_se
 
@@ -246,9 +247,6 @@ def taken_back_note(steps, path: list[CrossValidation]) -> str:
     )
 
 
-VELOCITY_KEYS = ("skew:encoders", "viscous:omega_l", "viscous:omega_m")
-"""Keys whose columns are, to first order, the same speed: an encoder time skew and viscous
-friction (the twist cannot tell them apart; the current may)."""
 
 
 def _twist_per_speed(model: ComplianceModel, key: str) -> float:

@@ -60,6 +60,13 @@ from ._spectrum import (
 FAMILIES = effects.discover_families()
 """The built-in families the loop can offer (registered families: `effects.discover_families()`)."""
 
+VELOCITY_KEYS = ("skew:encoders", "viscous:omega_l", "viscous:omega_m")
+"""Keys whose columns are, to first order, the same speed: an encoder time skew and viscous
+friction at either side ($\\omega_m \\approx N \\omega_l$). The twist cannot tell them apart
+(the current may), so a model holds at most one of them: beside one, another fits only the
+second-order difference between them (an acceleration, or the twist rate that
+`damping:twist_rate` names) with two large coefficients of opposite sign."""
+
 
 def _library_options_class():
     fields = [
@@ -136,6 +143,68 @@ def bridges_gaps(order: float, span: float, gap: float) -> bool:
     `MAX_GAP_PHASE` of its phase, or the span holds `GAP_EXEMPT_PERIODS` periods.
     """
     return order * gap <= MAX_GAP_PHASE or order * span >= 2.0 * math.pi * GAP_EXEMPT_PERIODS
+
+
+PASS_BINS = 20
+"""Angle bins over the span in which [`angle_passes`][] counts passes; a reversal shorter than
+one bin is no new pass (encoder noise at rest makes none)."""
+
+MIN_PASSES = 2
+"""Passes over an angle below which a spectrum peak whose order covers fewer than
+`GAP_EXEMPT_PERIODS` periods of the span is not offered ([`spectrum_orders`][])."""
+
+PASS_SAMPLES = 20_000
+"""At most this many evenly strided samples enter [`angle_passes`][]."""
+
+
+def angle_passes(theta) -> float:
+    """How many times the record passes over each angle: the median, over `PASS_BINS` equal bins
+    of the angle's span, of the number of monotone legs with a sample in the bin.
+
+    Legs are cut at reversals of at least one bin's width (a zig-zag filter: a retreat from
+    the running extreme by less than a bin is noise, not a new leg), so a one-way sweep is one
+    pass however long its pauses, a back-and-forth motion is two or more, and sweeps one after
+    the other (a jump back between logs) count once each. On at most `PASS_SAMPLES` evenly
+    strided samples; 0 for an empty record, 1 for one that does not move.
+    """
+    th = np.asarray(theta, np.float64)
+    if th.size == 0:
+        return 0.0
+    th = th[subsample(th.size, PASS_SAMPLES)]
+    lo, span = float(th.min()), float(np.ptp(th))
+    if not span > 0.0:
+        return 1.0
+    width = span / PASS_BINS
+    starts: list[int] = []  # the first sample of every leg after the first
+    direction, extreme, at = 0, float(th[0]), 0
+    for i, x in enumerate(th.tolist()):
+        if direction == 0:  # the first leg's direction: a departure of a bin from the start
+            if abs(x - extreme) >= width:
+                direction, extreme, at = (1 if x > extreme else -1), x, i
+        elif direction * (x - extreme) > 0:
+            extreme, at = x, i
+        elif direction * (extreme - x) >= width:  # a reversal: a new leg after the extreme
+            starts.append(at + 1)
+            direction, extreme, at = -direction, x, i
+    leg = np.searchsorted(np.asarray(starts, np.intp), np.arange(th.size), side="right")
+    bins = np.minimum(((th - lo) / width).astype(np.intp), PASS_BINS - 1)
+    pairs = np.unique(leg * PASS_BINS + bins)
+    return float(np.median(np.bincount(pairs % PASS_BINS, minlength=PASS_BINS)))
+
+
+def repeats_in_span(order: float, span: float) -> bool:
+    """Whether a spectrum peak of order `order` found over one pass of an angle span repeats
+    itself there `GAP_EXEMPT_PERIODS` times.
+
+    Over one pass of an angle (a one-way sweep) each angle is seen once, at one time, one
+    speed and one load. A peak's order is then chosen by the same pass it is to explain: over
+    a few periods the periodogram finds a peak in any smooth wiggle of the residual (a drift
+    along the sweep, a load-path or speed change, an unmodelled transient), which
+    cross-validation inside the sweep interpolates and a TEST on another sweep does not share.
+    Only an order whose periods repeat it many times shows that the shape is locked to the
+    angle. A named order (an integer, $2 \\pm 2/N$) is a hypothesis the joint's kinematics put
+    forward before the data, and cross-validation weighs it as before."""
+    return order * span >= 2.0 * math.pi * GAP_EXEMPT_PERIODS
 
 
 def min_resolvable_order(theta) -> float:
@@ -229,6 +298,7 @@ def spectrum_orders(
     existing: list[float],
     n_peaks: int,
     torque=None,
+    single_pass: list[float] | None = None,
 ) -> tuple[list[tuple[float, str]], OrderSpectrum | None]:
     """Orders to try for one angle: spectrum peaks (refined) plus the named orders it covers.
 
@@ -241,7 +311,10 @@ def spectrum_orders(
     out, and so are orders that TRAIN's widest angle gap leaves undetermined
     ([`bridges_gaps`][]). With `torque` (the reference torque of the same samples), a spectrum
     peak that is a function of the torque rather than of the angle is left out
-    ([`stands_apart_from_torque`][]). Returns `[(order, origin)]` (origin `"spectrum"` or
+    ([`stands_apart_from_torque`][]). Where TRAIN passes over the angle only once
+    ([`angle_passes`][] below `MIN_PASSES`: a one-way sweep), a spectrum peak is offered only
+    if its own periods repeat it ([`repeats_in_span`][]); the orders left out for that reason
+    are appended to `single_pass` (when given). Returns `[(order, origin)]` (origin `"spectrum"` or
     `"grid"`) and the spectrum (None when the record resolves no order in the range).
     """
     full = min_resolvable_order(theta)
@@ -270,10 +343,15 @@ def spectrum_orders(
         orders.append((k, "spectrum"))
     orders += [(k, "grid") for k in named]
     span, gap = float(np.ptp(np.asarray(theta))), widest_gap(theta)
+    once = bool(orders) and angle_passes(theta) < MIN_PASSES
     out, seen = [], []
     for k, origin in orders:
         if not bridges_gaps(k, span, gap):
             continue  # TRAIN leaves a gap this order is not determined across
+        if once and origin == "spectrum" and not repeats_in_span(k, span):
+            if single_pass is not None:
+                single_pass.append(k)
+            continue  # one pass: a peak of a few periods is not told from a drift in time
         if any(abs(k - e) < res / 2 for e in existing):
             continue  # already in the model
         if any(abs(k - s) < 1e-6 for s in seen):
@@ -307,6 +385,7 @@ def build_library(
     """
     options = LibraryOptions() if options is None else options
     spectra: dict[str, OrderSpectrum] = {}
+    single_pass: dict[str, tuple[float, float]] = {}  # per angle: highest order left out, span
     resid = residual
     t_ref = np.asarray(torque, np.float64)
 
@@ -317,6 +396,7 @@ def build_library(
         # residual / torque, on the samples `where` the torque is usable); it is not recorded
         own = residual is None and where is None
         theta = np.asarray(sig.get(signal))
+        dropped: list[float] = []
         orders, spec = spectrum_orders(
             theta if where is None else theta[where],
             resid if residual is None else residual,
@@ -326,9 +406,13 @@ def build_library(
             existing=existing,
             n_peaks=n_peaks,
             torque=t_ref if where is None else t_ref[where],
+            single_pass=dropped,
         )
         if spec is not None and own:
             spectra[signal] = spec
+        if dropped:
+            span = float(np.ptp(theta if where is None else theta[where]))
+            single_pass[signal] = max(single_pass.get(signal, (0.0,))[0], max(dropped)), span
         return orders
 
     ctx = CandidateContext(
@@ -348,6 +432,29 @@ def build_library(
     cands: list[Candidate] = []
     for family in effects.families():
         cands += family.candidates(ctx)
+    held = [k for k in model.effect_keys if k in VELOCITY_KEYS]
+    twins = sorted({c.key for c in cands if c.key in VELOCITY_KEYS} - set(held))
+    if held and twins:
+        cands = [c for c in cands if c.key not in VELOCITY_KEYS]
+        ctx.cannot_identify(
+            " and ".join(twins),
+            f"beside {held[0]}, already in the model, the twist sees one speed column (an "
+            "encoder skew and viscous friction both add a twist in proportion to the speed)",
+            "the motor current's friction tells them apart: see the speed reading's note",
+        )
+    for signal, (highest, span) in single_pass.items():
+        ctx.cannot_identify(
+            f"harmonic:{signal} and ripple:{signal} peaks below order {_limit(span):.3g}",
+            f"TRAIN passes over {signal} once (a one-way sweep of {span:.3g} rad), so they cannot "
+            f"be told from a drift along the sweep (peaks up to order {highest:.4g} were seen "
+            "and are not offered; the named orders still are)",
+            "record the range at least twice (back and forth, or two sweeps) to identify them",
+        )
     if unidentified is not None:
         unidentified.extend(ctx.unidentified)
     return cands, spectra
+
+
+def _limit(span: float) -> float:
+    """The lowest spectrum peak [`repeats_in_span`][] offers over one pass of `span` rad."""
+    return 2.0 * math.pi * GAP_EXEMPT_PERIODS / span if span > 0 else math.inf
