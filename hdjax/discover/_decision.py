@@ -247,8 +247,6 @@ def taken_back_note(steps, path: list[CrossValidation]) -> str:
     )
 
 
-
-
 def _twist_per_speed(model: ComplianceModel, key: str) -> float:
     """The twist [rad] per rad/s of link speed that the fitted term `key` adds."""
     coef = np.asarray(model.coef)
