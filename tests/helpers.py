@@ -151,6 +151,21 @@ def sim_recording(n: int = 400, *, seed: int = 0, dt: float = 0.004, with_torque
     )
 
 
+def path_recording(theta_l, torque, twist, *, dt: float, source: str):
+    """A Recording of `JOINT` moving along the output path `theta_l` under `torque`, its motor
+    angle carrying `twist` (the current: torque / 10, no extra columns)."""
+    theta_l = np.asarray(theta_l, np.float64)
+    return hdjax.make_recording(
+        t=np.arange(theta_l.size) * dt,
+        theta_m=JOINT.ratio * (theta_l + twist),
+        theta_l=theta_l,
+        current=np.asarray(torque) / 10.0,
+        torque=torque,
+        extras={},
+        source=source,
+    )
+
+
 def tree_allclose(a, b, *, rtol=1e-12, atol=0.0) -> bool:
     """Whether two pytrees have the same structure and close leaves."""
     la, ta = jax.tree_util.tree_flatten(a)

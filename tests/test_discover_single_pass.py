@@ -13,12 +13,11 @@ import re
 
 import numpy as np
 
-import hdjax
 from hdjax.compliance import ComplianceModel
 from hdjax.discover import pipeline_signals
 from hdjax.discover._library import angle_passes, build_library, spectrum_orders
 
-from .helpers import JOINT
+from .helpers import JOINT, path_recording
 
 SPAN = np.radians(298.0)
 NAMED = [1.0, 2.0, 3.0, 4.0, 6.73, 10.87, 12.5]
@@ -79,19 +78,9 @@ def test_one_pass_offers_a_peak_only_where_its_span_repeats_it_ten_times():
 
 def _recording(theta_l, order):
     """A joint whose twist carries an output harmonic of `order`, on the motion `theta_l`."""
-    n = theta_l.size
-    t = np.arange(n) * 4e-3
     torque = 40.0 * np.sin(theta_l)  # a gravity-like load along the path
     twist = torque * 1.5e-5 + np.radians(0.5 / 60) * np.sin(order * theta_l + 0.4)
-    return hdjax.make_recording(
-        t=t,
-        theta_m=JOINT.ratio * (theta_l + twist),
-        theta_l=theta_l,
-        current=torque / 10.0,
-        torque=torque,
-        extras={},
-        source="one pass",
-    )
+    return path_recording(theta_l, torque, twist, dt=4e-3, source="one pass")
 
 
 def _library(theta_l, order=5.3):

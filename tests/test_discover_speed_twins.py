@@ -9,29 +9,19 @@ speed term in the model.
 
 import numpy as np
 
-import hdjax
 from hdjax.compliance import ComplianceModel
 from hdjax.discover import pipeline_signals
 from hdjax.discover._library import VELOCITY_KEYS, build_library
 from hdjax.effects import EncoderSkew
 
-from .helpers import JOINT
+from .helpers import JOINT, path_recording
 
 
 def _to_and_fro(n=4000):
     t = np.arange(n) * 1e-3
     theta_l = 0.8 * np.sin(2 * np.pi * t / 2.0) + 0.2 * np.sin(2 * np.pi * t / 0.7)
     torque = 30.0 * np.sin(theta_l) + 5.0 * np.cos(2 * np.pi * t / 0.7)
-    twist = torque * 1.5e-5
-    return hdjax.make_recording(
-        t=t,
-        theta_m=JOINT.ratio * (theta_l + twist),
-        theta_l=theta_l,
-        current=torque / 10.0,
-        torque=torque,
-        extras={},
-        source="to and fro",
-    )
+    return path_recording(theta_l, torque, torque * 1.5e-5, dt=1e-3, source="to and fro")
 
 
 def _offered(model):
