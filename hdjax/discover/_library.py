@@ -385,7 +385,7 @@ def build_library(
     """
     options = LibraryOptions() if options is None else options
     spectra: dict[str, OrderSpectrum] = {}
-    single_pass: dict[str, tuple[float, float]] = {}  # per angle: highest order left out, span
+    single_pass: dict[str, float] = {}  # per angle whose peaks one pass left out: its span
     resid = residual
     t_ref = np.asarray(torque, np.float64)
 
@@ -411,8 +411,7 @@ def build_library(
         if spec is not None and own:
             spectra[signal] = spec
         if dropped:
-            span = float(np.ptp(theta if where is None else theta[where]))
-            single_pass[signal] = max(single_pass.get(signal, (0.0,))[0], max(dropped)), span
+            single_pass[signal] = float(np.ptp(theta))  # TRAIN's span: one line per run
         return orders
 
     ctx = CandidateContext(
@@ -442,12 +441,12 @@ def build_library(
             "encoder skew and viscous friction both add a twist in proportion to the speed)",
             "the motor current's friction tells them apart: see the speed reading's note",
         )
-    for signal, (highest, span) in single_pass.items():
+    for signal, span in single_pass.items():  # one line per run: the same at every step
         ctx.cannot_identify(
             f"harmonic:{signal} and ripple:{signal} peaks below order {_limit(span):.3g}",
-            f"TRAIN passes over {signal} once (a one-way sweep of {span:.3g} rad), so they cannot "
-            f"be told from a drift along the sweep (peaks up to order {highest:.4g} were seen "
-            "and are not offered; the named orders still are)",
+            f"TRAIN passes over {signal} once (a one-way sweep of {span:.3g} rad), so a peak "
+            "there cannot be told from a drift along the sweep (such peaks were seen and are "
+            "not offered; the named orders still are)",
             "record the range at least twice (back and forth, or two sweeps) to identify them",
         )
     if unidentified is not None:
