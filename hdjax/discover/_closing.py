@@ -107,6 +107,12 @@ def skew_estimate(models, data, options, joint) -> str | None:
             "the intervals do not overlap, so TRAIN does not tell the skew apart from the "
             "model's other terms; record the joint at two or more speeds to measure it"
         )
+        if options.fourier_order:
+            advice += (
+                ", and start without the paper's kinematic columns ([model] fourier_order = "
+                "0): at two speeds those functions of angle times speed (Song et al. eq. (9)) "
+                "take part of a twist proportional to speed"
+            )
     else:
         advice = (
             "check the encoders' sampling instants; if the delay is real, correct the "
