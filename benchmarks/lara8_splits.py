@@ -26,10 +26,15 @@ final TEST RMS at most 5.0 N·m, below the current-based torque and never above 
 the alternating splits never above the start by more than 5 %.
 
     python benchmarks/lara8_splits.py [--out benchmarks/out/lara8_splits.json]
-        [--refit hysteresis:torque,coulomb:omega_l ...] [--fts]
+        [--refit hysteresis:torque,coulomb:omega_l ...] [--fts] [--fourier-order N]
+
+With `--fourier-order N` the starting model has paper kinematic columns (functions of the
+product of angle and speed, Song et al. eq. (9)) of order `N` instead of the config's (0: none);
+the JSON's name then ends in `_fourierN`.
 """
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -138,6 +143,13 @@ def main():
         action="store_true",
         help="the force/torque-sensor reference of experiments/lara8_fts.toml instead",
     )
+    ap.add_argument(
+        "--fourier-order",
+        type=int,
+        default=None,
+        help="order of the paper's kinematic columns (products theta*omega) in the starting "
+        "model instead of the config's; 0 starts without them",
+    )
     args = ap.parse_args()
     t0 = time.perf_counter()
     meta = machine()  # the load at the start
@@ -149,6 +161,10 @@ def main():
     else:
         full, joint, opts = load()
         parts = {name: (full.select(~m), full.select(m)) for name, m in splits(full).items()}
+    if args.fourier_order is not None:
+        opts = dataclasses.replace(opts, fourier_order=args.fourier_order)
+        if args.out.parent == ap.get_default("out").parent:
+            args.out = args.out.with_name(f"{args.out.stem}_fourier{args.fourier_order}.json")
     rows, terms, by_key = [], {}, {}
     for name, (train, test) in parts.items():
         res = discover(train, test, joint, opts, context=context)
@@ -215,6 +231,7 @@ def main():
         benchmark="LARA8 joint 3, three splits"
         + (", force/torque-sensor reference (lara8_fts.toml)" if args.fts else ""),
         **meta,
+        fourier_order=opts.fourier_order,
         splits=rows,
         cross_refit_test_rms=cross,
         refit_sets=refits,
