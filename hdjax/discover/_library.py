@@ -142,7 +142,7 @@ def bridges_gaps(order: float, span: float, gap: float) -> bool:
     one-way sweep leaves whole angle ranges to TEST). Offered only if the gap spans at most
     `MAX_GAP_PHASE` of its phase, or the span holds `GAP_EXEMPT_PERIODS` periods.
     """
-    return order * gap <= MAX_GAP_PHASE or order * span >= 2.0 * math.pi * GAP_EXEMPT_PERIODS
+    return order * gap <= MAX_GAP_PHASE or repeats_in_span(order, span)
 
 
 PASS_BINS = 20

@@ -247,19 +247,22 @@ def _two_stage(model, rows, inst, cols: np.ndarray) -> _FitRows | _ArrayRows:
     if not in_memory:
         return _FitRows(rows, inst, cols, gamma)
     fz = held.pop()[0] @ gamma
-    if cols.size == rows.a.shape[1]:  # every column fitted: the fits are the design
+    if _all_columns(rows.a, cols):  # every column fitted: the fits are the design
         return _ArrayRows(fz)
     fitted = np.array(rows.a, copy=True)  # as `_FitRows.designs` forms it, once
     fitted[:, cols] = fz
     return _ArrayRows(fitted)
 
 
+def _all_columns(x: np.ndarray, cols: np.ndarray) -> bool:
+    """Whether `cols` are all of `x`'s columns, in order."""
+    return cols.size == x.shape[1] and np.array_equal(cols, np.arange(x.shape[1]))
+
+
 def _columns(x: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """`x[:, cols]`, without the copy when `cols` are all of `x`'s columns in order (read
     only)."""
-    if cols.size == x.shape[1] and np.array_equal(cols, np.arange(x.shape[1])):
-        return x
-    return x[:, cols]
+    return x if _all_columns(x, cols) else x[:, cols]
 
 
 def effect_intervals(
