@@ -153,6 +153,7 @@ def deformation_rows(exp) -> tuple[dict, dict]:
     final_est = res.aux.steps[-1].torque_estimate if res.aux.steps else res.aux.baseline_estimate
     rows["song_discover_final"] = _err(final_est, ref)
     rows["song_discover_final"]["effects"] = list(res.aux.effects)
+    rows["song_discover_final"]["start"] = res.aux.start_structure.get("label", "")
     rows["current"] = _err(np.asarray(test.current), ref)
     curves = {
         "reference": ref,
@@ -285,7 +286,12 @@ def page(result: dict) -> str:
             "deformation: Song model as configured (`[model]` of lara8_fts.toml)", r["song_config"]
         ),
         line("deformation: Song model, starting model of the residual loop", song),
-        line(f"deformation: after `discover` (added: {eff})", disc),
+        line(
+            f"deformation: after `discover` (added: {eff}"
+            + (f"; from the {disc['start']}" if disc.get("start") else "")
+            + ")",
+            disc,
+        ),
         line(
             f"network (BP, twist + current inputs; median of {net['seeds']} seeds, RMS "
             f"{f(net['rms_range'][0])}..{f(net['rms_range'][1])})",

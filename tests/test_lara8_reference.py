@@ -144,5 +144,9 @@ def test_the_reference_page_is_not_stale(lara8_dir):
         shown = [float(v) for v in re.findall(r"\| (-?\d+\.\d+)", line)]
         expected = [round(rows[key][k], 2) for k in ("rms", "max", "bias")]
         assert shown == expected, f"{label}: the page says {shown}, the code gives {expected}{fix}"
-    effects = ", ".join(f"`{e}`" for e in rows["song_discover_final"]["effects"]) or "none"
-    assert f"(added: {effects})" in page, f"the page names other effects than {effects}{fix}"
+    final = rows["song_discover_final"]
+    effects = ", ".join(f"`{e}`" for e in final["effects"]) or "none"
+    start = f"; from the {final['start']}" if final.get("start") else ""
+    assert f"(added: {effects}{start})" in page, (
+        f"the page names other effects or another start than {effects}{start}{fix}"
+    )

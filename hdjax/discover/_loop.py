@@ -32,7 +32,12 @@
    the run claims no effect the starting model lacks. The whole path is tested first, the
    single steps after it (a protected procedure), so a joint without an undeclared effect
    rarely gets one, and a weak step after a confirmed one keeps its chance.
-7. Refit on all of TRAIN, estimate torque on TEST and record the errors. TEST is never used
+7. **A second starting structure.** When the starting model holds the paper's kinematic
+   columns (eq. (9), functions of angle times speed) and the path added an effect whose
+   columns depend on the speed or direction of motion, steps 3-6 run again from the structure
+   without those columns, on the same folds; that path is kept when its final cross-validated
+   torque error lies beyond one standard error below the first's (`_without_kinematic`).
+8. Refit on all of TRAIN, estimate torque on TEST and record the errors. TEST is never used
    to choose. At the end every added effect's amplitude gets a 95 % moving-block bootstrap
    interval over TRAIN ([`hdjax.discover._uncertainty`][]), and structure the final model
    leaves above the noise is listed as `unexplained`.
@@ -78,6 +83,7 @@ from ._decision import (
 from ._folds import MEMORY_GAP, FoldPlan, fold_plan
 from ._options import DiscoverOptions as DiscoverOptions, stopping_rule
 from ._pipeline import (
+    CrossValidation,
     PipelineData,
     calibrate,
     canonical,
@@ -87,6 +93,7 @@ from ._pipeline import (
     design,
     estimate,
     has_path,
+    within_one_se,
 )
 from ._record import DiscoveryRecord as DiscoveryRecord, DiscoveryStep as DiscoveryStep
 from ._scores import _as_data, score_candidates as score_candidates, training_data
@@ -297,17 +304,25 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
         data, test_data, plan, options, extra_columns, joint, base_metrics, phase, say, notes,
         unidentified,
     )  # fmt: skip
-    steps, model, est_train, cv, spectra, resid, ranking = _add_effects(run, model, est_train, cv)
+    chosen = _add_effects(run, model, est_train, cv)
+    if options.fourier_order:
+        chosen = _without_kinematic(run, train, chosen, base_cv)
+    steps, model, est_train, cv, spectra, resid, ranking = chosen[:7]
+    notes += chosen.notes
     with phase("intervals"):
         amplitudes = effect_amplitudes(model, data, est_train, options) if steps else []
         for s_, iv in zip(steps, amplitudes):
             s_.amplitude = iv
         readings = [("starting model", baseline_model, baseline_est_train)]
         readings += [("final model", model, est_train)] if steps else []
-        skew = skew_estimate(readings, data, options, joint)
+        # the skew note's advice reads the structure the steps start from
+        start_options = (
+            dataclasses.replace(options, fourier_order=0) if chosen.start_structure else options
+        )
+        skew = skew_estimate(readings, data, start_options, joint)
     with phase("unexplained"):
         left = left_unexplained(resid, spectra, data, options)
-    notes += list(dict.fromkeys(unidentified)) + ([skew] if skew else [])
+    notes += list(dict.fromkeys(chosen.unidentified)) + ([skew] if skew else [])
     final = steps[-1].test if steps else base_metrics
     with phase("reference"):
         checks = reference_findings(
@@ -339,6 +354,7 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
         reference_checks=checks,
         cv_test_ratio=float(ratio),
         stopping_rule=stopping_rule(options),
+        start_structure=chosen.start_structure,
     )
     stats = dict(
         n_effects=len(steps),
@@ -352,15 +368,36 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
     return Solution(model, RESULTS.successful, stats, aux=record)
 
 
-def _add_effects(run: _Run, model, est_train, cv):
+class _Path(NamedTuple):
+    """One path of the loop from a starting model: its steps and the state after the last,
+    the notes it wrote, and (when it starts from another structure than the configured one)
+    that start: `DiscoveryRecord.start_structure`."""
+
+    steps: list[DiscoveryStep]
+    model: object
+    est_train: np.ndarray
+    cv: CrossValidation
+    spectra: dict
+    resid: np.ndarray
+    ranking: list[dict]
+    notes: list[str]
+    unidentified: list[str]
+    start_structure: dict = {}
+
+
+def _add_effects(run: _Run, model, est_train, cv, reference: CrossValidation | None = None):
     """The loop proper: score the library, shortlist, try, choose and add one effect per
     step until the stopping rule ([`hdjax.discover._decision.choose`][]) or `max_effects`
     stops it; then every step is taken back unless the path as a whole beats the starting
-    model beyond one standard error ([`hdjax.discover._decision.beats_start`][]).
+    model beyond one standard error ([`hdjax.discover._decision.beats_start`][]), or
+    `reference`, when given (the configured starting model's cross-validation, for a path
+    from another starting structure).
 
-    **Returns:** `(steps, model, TRAIN estimate, cross-validation, spectra, residual,
-    ranking)` after the last step.
+    **Returns:** a `_Path`: the steps, and the model, TRAIN estimate, cross-validation,
+    spectra, residual and ranking after the last step; its notes are its own (`run.notes`
+    and `run.unidentified` are not written).
     """
+    run = run._replace(notes=[], unidentified=[])
     data, plan, options, notes = run.data, run.plan, run.options, run.notes
     steps: list[DiscoveryStep] = []
     start: tuple = ()  # the starting model's state, kept after its scoring
@@ -418,11 +455,93 @@ def _add_effects(run: _Run, model, est_train, cv):
         steps.append(step)
         path.append(cv)
         _say_step(steps, run.base_metrics, run.say, notes)
-    if not beats_start(path, plan.blocks_rec):
-        notes.append(taken_back_note(steps, path))
+    gate = path if reference is None else [reference, *path[1:]]
+    if not beats_start(gate, plan.blocks_rec):
+        notes.append(taken_back_note(steps, gate))
         run.say(notes[-1])
-        return [], *start
-    return steps, model, est_train, cv, spectra, resid, ranking
+        return _Path([], *start, notes, run.unidentified)
+    return _Path(steps, model, est_train, cv, spectra, resid, ranking, notes, run.unidentified)
+
+
+MOTION_FAMILIES = frozenset(
+    ("coulomb", "viscous", "skew", "stribeck", "hysteresis", "backlash", "damping")
+)
+"""Families whose columns depend on the speed or the direction of motion: on a slow sweep the
+paper's kinematic columns (functions of angle times speed) compete with them."""
+
+KINEMATIC_FREE = (
+    "the final model leaves out the starting model's kinematic columns (Song et al. eq. (9), "
+    "functions of the product of angle and speed): from the same starting structure without "
+    "them, the loop's path reaches a cross-validated torque RMS of {alt:.4g} N·m against "
+    "{own:.4g} N·m with them (beyond one standard error, paired over the held-out blocks). On "
+    "a slow motion those columns are nearly proportional to the speed, so they take up what a "
+    "speed-dependent effect (encoder skew, friction, hysteresis) explains physically; the "
+    'model written holds the structure found ([model] kinematic = "none" for hdjax run)'
+)
+
+
+def _without_kinematic(run: _Run, train, found: _Path, base_cv: CrossValidation) -> _Path:
+    """The loop's path from the starting structure without the paper's kinematic columns
+    (eq. (9)), on the same folds, kept instead of `found` when its final model's
+    cross-validated torque error lies beyond one standard error below `found`'s (and its path
+    beats the configured starting model's, `base_cv`, as every path must).
+
+    The paper's columns are functions of $\\theta\\omega$: on a slow sweep nearly linear in
+    the speed, they absorb an encoder skew or a speed-dependent friction or memory state in a
+    form that does not carry over to other speeds and angles, and the effects the loop then
+    adds compete with them. Which structure holds is a question of model choice between two
+    whole paths (a greedy step cannot reach it: removing the columns before an effect is
+    added raises the error), decided by the same cross-validation as every step, and a tie
+    keeps the configured structure.
+
+    The other path is followed only when the configured one added an effect of a family the
+    columns compete with (`MOTION_FAMILIES`): only then can they have taken up part of an
+    effect the model holds. A joint on which the configured path finds no such effect is not
+    given a second chance at one (on clean joints with white encoder noise, following it
+    whenever such a family was merely screened named effects the joints do not have).
+    """
+    options = run.options
+    if not {s.key.split(":")[0] for s in found.steps} & MOTION_FAMILIES:
+        return found
+    alt_options = dataclasses.replace(options, fourier_order=0)
+    notes: list[str] = []
+    run.say(
+        "second path: from the starting structure without the paper's kinematic columns "
+        "(kept only if its cross-validated torque error is lower beyond one standard error)"
+    )
+    try:
+        with run.phase("baseline"):
+            model = calibrate_baseline(train, run.joint, alt_options, notes)
+            est_train = estimate(model, run.data)
+        with run.phase("torque CV"):
+            cv = cross_validate(model, run.data, run.plan.folds_rec, chunk=options.chunk)
+    except (CalibrationError, InversionError):
+        return found
+    quiet = run._replace(options=alt_options, say=lambda _: None)
+    alt = _add_effects(quiet, model, est_train, cv, reference=base_cv)
+    if not alt.steps or not qualifies(alt.cv.torque_rms, found.cv.torque_rms, options):
+        return found
+    if within_one_se(found.cv, alt.cv, run.plan.blocks_rec):
+        return found
+    change = KINEMATIC_FREE.format(alt=alt.cv.torque_rms, own=found.cv.torque_rms)
+    run.say(change)
+    with run.phase("test"):
+        metrics = _test_errors(model, run.test_data, run.joint.rated_torque)[0]
+    start = dict(
+        label="starting model without its kinematic columns",
+        note=change,
+        rms=metrics.rms,
+        max=metrics.max,
+        cv_torque_rms=cv.torque_rms,
+        cv_twist_rms_arcsec=cv.twist_rms_arcsec,
+    )
+    run.say(
+        f"{start['label']}: test torque RMS {metrics.rms:.4g} N·m, cross-validated torque RMS "
+        f"{cv.torque_rms:.4g} N·m"
+    )
+    for k in range(1, len(alt.steps) + 1):
+        _say_step(alt.steps[:k], run.base_metrics, run.say, [])
+    return alt._replace(notes=[change, *notes, *alt.notes], start_structure=start)
 
 
 def _step(run: _Run, best, model, est_train, ranked, ranking, spectra) -> DiscoveryStep:

@@ -67,6 +67,11 @@ class DiscoveryRecord:
     stopping_rule: str = ""
     """The rule the loop stopped by, in words, with its settings
     (see `DiscoverOptions`)."""
+    start_structure: dict = dataclasses.field(default_factory=dict)
+    """Empty when the steps start from the configured starting model. Otherwise the start
+    they come from (the structure without the paper's kinematic columns, whose path beat the
+    configured one's): `label`, `note` (why, in words), TEST `rms` and `max` [N·m],
+    `cv_torque_rms` [N·m] and `cv_twist_rms_arcsec`."""
     selection: dict = dataclasses.field(default_factory=dict)
     """With a selection sample of a long TRAIN log (`hdjax discover --select-samples`): its
     rows and blocks, and whether the model written was calibrated on the whole log; else

@@ -59,6 +59,7 @@ def report_dict(solution: Solution, *, extra: dict | None = None) -> dict:
             }
             for s in result.steps
         ],
+        **({"start_structure": result.start_structure} if result.start_structure else {}),
         "final": {"rms": f.rms, "max": f.max, "rms_pct": f.rms_pct, "max_pct": f.max_pct},
         "effects": result.effects,
         "vocabulary": effects.vocabulary(),
@@ -216,6 +217,13 @@ def report_markdown(d: dict, figures: list[tuple[str, str]], use: str | None = N
         f"| 0 | starting model | {b['rms']:.4g} | {b['max']:.4g} | {b['cv_torque_rms']:.4g} | "
         f"{b['cv_twist_rms_arcsec']:.4g} |"
     )
+    if d.get("start_structure"):
+        # the steps start from another structure: its row, so each step reads from its start
+        a = d["start_structure"]
+        lines.append(
+            f"| 0b | {a['label']} | {a['rms']:.4g} | {a['max']:.4g} | {a['cv_torque_rms']:.4g} | "
+            f"{a['cv_twist_rms_arcsec']:.4g} |"
+        )
     details = []
     for i, s in enumerate(d["steps"], 1):
         a = s.get("amplitude") or {}
