@@ -15,6 +15,7 @@ from types import SimpleNamespace
 
 import pytest
 
+from hdjax import CalibrationError
 from hdjax.discover import DiscoverOptions, _loop
 from hdjax.discover._pipeline import CrossValidation
 from hdjax.effects import PaperFourier
@@ -72,3 +73,21 @@ def test_no_second_path_without_a_motion_effect_in_the_model(monkeypatch):
     moved = found._replace(steps=[*found.steps, step("hysteresis:torque")])
     with pytest.raises(Calibrated):
         _loop._without_kinematic(run, None, moved, cv)
+
+
+def test_a_second_path_that_cannot_start_is_said(monkeypatch):
+    # the structure without the columns cannot be calibrated: the configured path stands,
+    # and a note says why the second one was not run (it is not skipped silently)
+    def calibrate(*a, **k):
+        raise CalibrationError("rank-deficient design")
+
+    monkeypatch.setattr(_loop, "calibrate_baseline", calibrate)
+    run = _loop._Run(*[None] * len(_loop._Run._fields))
+    run = run._replace(options=DiscoverOptions(), phase=_loop.Phases(), say=lambda _: None)
+    cv = CrossValidation(1.0, 1.0, [], [])
+    step = SimpleNamespace(key="hysteresis:torque")
+    found = _loop._Path([step], None, None, cv, {}, None, [], ["a note"], [])
+    out = _loop._without_kinematic(run, None, found, cv)
+    assert out.steps == found.steps and out.cv is cv and not out.start_structure
+    assert out.notes[0] == "a note" and len(out.notes) == 2
+    assert "not run: rank-deficient design" in out.notes[1]

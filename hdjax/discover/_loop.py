@@ -515,8 +515,13 @@ def _without_kinematic(run: _Run, train, found: _Path, base_cv: CrossValidation)
             est_train = estimate(model, run.data)
         with run.phase("torque CV"):
             cv = cross_validate(model, run.data, run.plan.folds_rec, chunk=options.chunk)
-    except (CalibrationError, InversionError):
-        return found
+    except (CalibrationError, InversionError) as err:
+        why = (
+            "second path (from the starting structure without the kinematic columns) not "
+            f"run: {err}"
+        )
+        run.say(why)
+        return found._replace(notes=[*found.notes, why])
     quiet = run._replace(options=alt_options, say=lambda _: None)
     alt = _add_effects(quiet, model, est_train, cv, reference=base_cv)
     if not alt.steps or not qualifies(alt.cv.torque_rms, found.cv.torque_rms, options):
