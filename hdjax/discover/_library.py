@@ -208,7 +208,7 @@ def repeats_in_span(order: float, span: float) -> bool:
     the sweep serves), so the loop keeps the choice to cross-validation and tells
     the user that the angle reading is unconfirmed. A named order (an integer,
     $2 \\pm 2/N$) is a hypothesis the joint's kinematics put forward before the data."""
-    return order * span >= 2.0 * math.pi * GAP_EXEMPT_PERIODS
+    return order >= _limit(span)
 
 
 def min_resolvable_order(theta) -> float:
@@ -459,5 +459,6 @@ def build_library(
 
 
 def _limit(span: float) -> float:
-    """The lowest spectrum peak [`repeats_in_span`][] confirms over one pass of `span` rad."""
+    """The lowest order whose periods repeat `GAP_EXEMPT_PERIODS` times over `span` rad (the
+    threshold of [`repeats_in_span`][], and the order the one-pass note names)."""
     return 2.0 * math.pi * GAP_EXEMPT_PERIODS / span if span > 0 else math.inf
