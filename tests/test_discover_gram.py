@@ -13,7 +13,13 @@ import scipy.linalg
 
 from hdjax.discover._fold_solver import FoldSolver, one_block
 from hdjax.discover._folds import contiguous_blocks, fold_assignment
-from hdjax.discover._gram import block_statistics, block_statistics_batched, fold_gains
+from hdjax.discover._gram import (
+    block_spans,
+    block_statistics,
+    block_statistics_streamed,
+    fold_gains,
+    memory_passes,
+)
 from hdjax.discover._select import cv_gains, fold_basis
 
 
@@ -108,8 +114,9 @@ def test_scores_do_not_depend_on_the_batches():
     whole = fold_gains(block_statistics(a, groups, y, blocks, chunk=900), fob, 5)
     for sizes in ([1, 1, 1, 1, 1], [2, 0, 3], [4, 1]):
         edges = np.cumsum([0] + sizes)
-        batches = (groups[lo:hi] for lo, hi in zip(edges[:-1], edges[1:]))
-        stats = block_statistics_batched(a, batches, y, blocks, chunk=900)
+        spans = block_spans(blocks, 900)
+        batches = (memory_passes(a, groups[lo:hi], spans) for lo, hi in zip(edges[:-1], edges[1:]))
+        stats = block_statistics_streamed(batches, y, blocks)
         assert stats.widths == tuple(g.shape[1] for g in groups)
         got = fold_gains(stats, fob, 5)
         np.testing.assert_allclose(got[0], whole[0], rtol=0, atol=1e-10)
@@ -158,7 +165,9 @@ def test_fold_solver_equals_lstsq_on_the_training_rows(seed):
 
 
 def test_usable_check_equals_the_whole_array_check():
-    from hdjax.discover._scores import _usable
+    from hdjax.discover._scores import _column_range, _scorable
+
+    _usable = lambda c: _scorable(*_column_range(c))
 
     rng = np.random.default_rng(0)
     x = rng.standard_normal((500, 2))

@@ -22,7 +22,7 @@ threshold.
 
 Memory: the statistics take `n_blocks x (p + 1) x (p + 1 + c)` numbers; the pass reads the
 samples in chunks of whole blocks of at most `chunk` rows, so no copy of the data is made, and
-the candidates' columns may arrive batch by batch ([`block_statistics_batched`][]), so the
+the candidates' columns may arrive batch by batch ([`block_statistics_streamed`][]), so the
 library's columns need never be in memory all at once.
 """
 
@@ -68,25 +68,20 @@ def _block_bounds(blocks: np.ndarray) -> np.ndarray:
 
 def block_statistics(a, groups, y, blocks, *, chunk: int = CHUNK) -> BlockStatistics:
     """Per-block statistics of the base design `a` `(n, p)`, the candidate `groups` (a list
-    of `(n, w)` arrays) and the target `y` (see the module docstring).
+    of `(n, w)` arrays) and the target `y` (see the module docstring), all in memory.
 
     `blocks` is the block index per sample (contiguous blocks in sample order, as
-    [`hdjax.discover._folds.contiguous_blocks`][] makes them).
+    [`hdjax.discover._folds.contiguous_blocks`][] makes them). The rows are read as
+    [`block_statistics_streamed`][] reads a log: in passes of whole blocks, at most `chunk`
+    rows at a time (at least one block).
     """
-    return block_statistics_batched(a, [groups], y, blocks, chunk=chunk)
+    passes = memory_passes(np.asarray(a, np.float64), list(groups), block_spans(blocks, chunk))
+    return block_statistics_streamed([passes], y, blocks)
 
 
-def block_statistics_batched(a, batches, y, blocks, *, chunk: int = CHUNK) -> BlockStatistics:
-    """[`block_statistics`][] of candidate groups that arrive batch by batch: `batches` is an
-    iterable of lists of `(n, w)` arrays (a generator may compute each batch when asked), so
-    only one batch's columns need be in memory. The groups are numbered in arrival order; the
-    statistics equal those of all groups at once (each group's are its own: the base's
-    projection and the per-block products of its columns).
-
-    The rows in memory are read as [`block_statistics_streamed`][] reads a log: in passes of
-    whole blocks, at most `chunk` rows at a time (at least one block).
-    """
-    a = np.asarray(a, np.float64)
+def block_spans(blocks, chunk: int = CHUNK) -> list[tuple[int, int]]:
+    """`(lo, hi)` row spans of whole consecutive blocks, each at most `chunk` rows (a longer
+    block alone)."""
     bounds = _block_bounds(np.asarray(blocks))
     spans, b = [], 0
     while b < bounds.size - 1:
@@ -95,51 +90,40 @@ def block_statistics_batched(a, batches, y, blocks, *, chunk: int = CHUNK) -> Bl
             e += 1
         spans.append((int(bounds[b]), int(bounds[e])))
         b = e
-
-    def rows_of(groups):
-        def passes():
-            for lo, hi in spans:
-                yield lo, hi, a[lo:hi], [g[lo:hi] for g in groups]
-
-        return passes
-
-    return _statistics((rows_of(list(g)) for g in _at_least_one(batches)), y, blocks, None)
+    return spans
 
 
-def block_statistics_streamed(passes, y, blocks, select) -> BlockStatistics:
+def memory_passes(a: np.ndarray, groups: list, spans):
+    """A `passes()` (see [`block_statistics_streamed`][]) over rows already in memory: the
+    base design `a` and the candidate `groups`, read span by span (views, no copies)."""
+
+    def passes():
+        for lo, hi in spans:
+            yield lo, hi, a[lo:hi], [g[lo:hi] for g in groups]
+
+    return passes
+
+
+def block_statistics_streamed(batch_passes, y, blocks, select=None) -> BlockStatistics:
     """[`block_statistics`][] from rows that arrive chunk by chunk, so neither the base design
-    nor any candidate's columns are ever held for the whole record.
+    nor any candidate's columns need ever be held for the whole record.
 
-    `passes()` starts a pass over the record: an iterator of `(lo, hi, a, groups)`, the base
-    design's rows `lo:hi` and every candidate group's (a list of `(hi - lo, w)` arrays, the
-    same groups in every chunk); chunk boundaries may fall anywhere (a block's sums are
-    accumulated over the chunks it spans). Two passes: the first sums $A^\top A$, $A^\top y$
-    and $A^\top C$; then `select()` gives the indices of the groups to keep (what the first
-    pass found usable), and the second sums the per-block statistics of `y` and the kept
-    groups made orthogonal to the base. `y` is the target over the whole record.
+    `batch_passes` yields, per batch of candidate groups, a `passes()` that starts a pass over
+    the record: an iterator of `(lo, hi, a, groups)`, the base design's rows `lo:hi` and that
+    batch's candidate groups' (a list of `(hi - lo, w)` arrays, the same groups in every
+    chunk); chunk boundaries may fall anywhere (a block's sums are accumulated over the chunks
+    it spans). `y` is the target over the whole record.
+
+    Two passes per batch. The first sums $A^\\top C$, and on the first batch also
+    $A^\\top A$ and $A^\\top y$. Then `select()` (when given) gives the indices, within the
+    batch, of the groups to keep (what the first pass found usable), and the second pass sums
+    the per-block statistics of `y` and of the kept groups made orthogonal to the base (a
+    refit on `[A | C]` equals one on `[A | C - A W]`, so the scores are unchanged, but a
+    candidate close to the base's span no longer loses its digits to the cancellation in
+    $C^\\top C - C^\\top A (A^\\top A)^{-1} A^\\top C$), with the blocks' `[A | y]`
+    products on the first batch. The groups are numbered in arrival order, the kept ones
+    only.
     """
-    return _statistics([passes], y, blocks, select)
-
-
-def _at_least_one(batches):
-    """The batches, or one empty batch where there are none (the base's statistics remain)."""
-    empty = True
-    for batch in batches:
-        empty = False
-        yield batch
-    if empty:
-        yield []
-
-
-def _statistics(batch_passes, y, blocks, select) -> BlockStatistics:
-    """The statistics, one batch of groups at a time: `batch_passes` yields, per batch, a
-    `passes()` over the rows with that batch's groups (see [`block_statistics_streamed`][]).
-    The base's sums ($A^\top A$, $A^\top y$ and the blocks' `[A | y]` products) are taken on
-    the first batch's passes only; each batch then costs its own $A^\top C$ pass and one
-    pass of per-block sums, its columns made orthogonal to the base first (a refit on
-    `[A | C]` equals one on `[A | C - A W]`, so the scores are unchanged, but a candidate close
-    to the base's span no longer loses its digits to the cancellation in
-    $C^\top C - C^\top A (A^\top A)^{-1} A^\top C$)."""
     y = np.asarray(y, np.float64)
     bounds = _block_bounds(np.asarray(blocks))
     base = project = wy = None

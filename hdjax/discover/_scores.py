@@ -1,6 +1,10 @@
 """One step's candidate scores: the library's columns, their cross-validated twist gains
-on the standard folds and on every resampled fold assignment, and pysindy's selection (in
-memory, or chunk by chunk with `options.chunk`)."""
+on the standard folds and on every resampled fold assignment, and pysindy's selection.
+
+The scores are computed once, against a row source ([`_block_scores`][]): the record in
+memory ([`_memory_batches`][]: the candidates' columns computed on the whole record, a batch
+at a time) or a log chunk by chunk with `options.chunk` ([`_chunk_batches`][]: every column
+formed chunk by chunk, memory states carried)."""
 
 from __future__ import annotations
 
@@ -10,16 +14,12 @@ from .._joint import Joint
 from ..compliance import ComplianceModel
 from ._chunked import Chunks, DahlCarry, own_rows, sequential, twist_residual
 from ._decision import Scored
-from ._gram import block_statistics_batched, block_statistics_streamed, fold_gains
+from ._gram import block_spans, block_statistics_streamed, fold_gains, memory_passes
 from ._library import build_library, candidate_columns
 from ._options import DiscoverOptions
 from ._pipeline import PipelineData, canonical, chunks_of, design, estimate, pipeline_signals
 from ._select import (
     MAX_SINDY_ROWS,
-    block_grams,
-    cv_gains,
-    cv_gains_by_blocks,
-    fold_basis,
     sindy_select,
 )
 from ._timing import null_phases
@@ -57,81 +57,42 @@ BATCH_COLUMNS = 16
 many columns of the record, not the whole library's)."""
 
 
-def _usable(c: np.ndarray) -> bool:
-    """A candidate whose columns are finite and not constant can be scored.
-
-    Column by column (a reduction along the first axis of an `(n, 2)` array is several times
-    slower); a column is finite exactly when its minimum and maximum are."""
-    varies = False
-    for j in range(c.shape[1]):
-        lo, hi = c[:, j].min(), c[:, j].max()
-        if not (np.isfinite(lo) and np.isfinite(hi)):
-            return False
-        varies = varies or bool(hi > lo)
-    return varies
+def _column_range(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each column's minimum and maximum (column by column: a reduction along the first axis
+    of an `(n, 2)` array is several times slower)."""
+    lo = np.array([c[:, j].min() for j in range(c.shape[1])])
+    hi = np.array([c[:, j].max() for j in range(c.shape[1])])
+    return lo, hi
 
 
-def _streamed_scores(cands, sig, torque, a, y, resid, blocks, options, phase, take=None):
-    """Block statistics of the candidates' columns, computed `BATCH_COLUMNS` columns at a
-    time, and the sparse regression on every `step`-th sample of them (the rows
-    [`sindy_select`][hdjax.discover._select.sindy_select] reads).
-
-    `take` (optional) takes a part's rows from columns computed on the whole record.
-
-    **Returns:** `(sindy-selected per column, owner candidate per column, usable candidate
-    indices, BlockStatistics of the usable candidates)`.
-    """
-    take = take or (lambda x: x)
-    n = a.shape[0]
-    step = max(1, n // MAX_SINDY_ROWS)
-    thin: list[np.ndarray] = []
-    owner: list[int] = []
-    usable: list[int] = []
-
-    def batches():
-        batch, width = [], 0
-        for i, cand in enumerate(cands):
-            c = take(candidate_columns(cand.term, sig, torque))
-            for j in range(c.shape[1]):
-                thin.append(np.ascontiguousarray(c[::step, j]))
-                owner.append(i)
-            if _usable(c):
-                usable.append(i)
-                batch.append(c)
-                width += c.shape[1]
-            if width >= BATCH_COLUMNS:
-                yield batch
-                batch, width = [], 0
-        if batch:
-            yield batch
-
-    with phase("twist CV"):  # the candidates' columns included
-        stats = block_statistics_batched(a, batches(), y, blocks)
-    with phase("sindy"):
-        # every `step`-th row, as `sindy_select` takes them (it keeps these rows whole)
-        selected = sindy_select(
-            a[::step],
-            resid[::step],
-            thin,
-            [str(o) for o in owner],
-            threshold=options.sindy_threshold,
-        )
-    return selected, np.asarray(owner), usable, stats
+def _scorable(lo: np.ndarray, hi: np.ndarray) -> bool:
+    """From its columns' ranges: a candidate whose columns are finite and not all constant can
+    be scored (a column is finite exactly when its minimum and maximum are)."""
+    return bool(np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.any(hi > lo))
 
 
-def _chunked_scores(cands, model, chunks: Chunks, resid, blocks, options, phase):
-    """[`_streamed_scores`][] with the base design and every candidate's columns formed chunk
-    by chunk ([`hdjax.discover._gram.block_statistics_streamed`][]); the Dahl states of
-    hysteresis candidates carry across chunks. The sparse regression reads the same rows
-    (every `step`-th sample), gathered during the first pass."""
-    model = canonical(model)
-    n = chunks.n
-    step = max(1, n // MAX_SINDY_ROWS)
+def _memory_batches(cands, sig, torque, a, take, blocks):
+    """The in-memory row source: per batch of candidates (at least `BATCH_COLUMNS` columns),
+    `(candidate indices, passes)`, the columns computed on the whole record (memory states
+    run through every row), taken to the part's rows, and read in spans of whole blocks.
+    A batch's columns are computed when the batch is asked for, so only one batch is held."""
+    spans = block_spans(blocks)
+    batch, cols, width = [], [], 0
+    for i, cand in enumerate(cands):
+        c = take(candidate_columns(cand.term, sig, torque))
+        batch.append(i)
+        cols.append(c)
+        width += c.shape[1]
+        if width >= BATCH_COLUMNS or i == len(cands) - 1:
+            yield batch, memory_passes(a, cols, spans)
+            batch, cols, width = [], [], 0
+
+
+def _chunk_batches(cands, model, chunks: Chunks):
+    """The chunked row source: one batch of every candidate, its `passes()` forming the base
+    design and each candidate's columns chunk by chunk, the Dahl states of hysteresis
+    candidates carried across chunks."""
     active = np.asarray(model.active)
-    widths = []
-    lo_hi = []  # per candidate column: running minimum and maximum
-    thin_a, thin_c = [], []
-    first = [True]
 
     def passes():
         carry = DahlCarry()
@@ -148,47 +109,85 @@ def _chunked_scores(cands, model, chunks: Chunks, resid, blocks, options, phase)
                         own_rows(tc, h),
                         rows,
                         cand.term.score_in_numpy,
-                    )
-                    c = c[:, None]
+                    )[:, None]
                 else:
                     c = candidate_columns(cand.term, sc, tc)[h : h + rows]
                 groups.append(np.asarray(c, np.float64))
-            if first[0]:
-                # copies, not views: a view of every `step`-th row keeps the whole chunk's
-                # arrays alive, and memory would grow with the record instead of the chunk
-                start = (-lo) % step
-                thin_a.append(np.array(a[start::step]))
-                thin_c.append([np.array(g[start::step]) for g in groups])
-                lo_hi.append([(g.min(axis=0), g.max(axis=0)) for g in groups])
             yield lo, hi, a, groups
-        first[0] = False
 
-    def usable_groups():
-        for i in range(len(cands)):
-            lo_ = np.min([m[i][0] for m in lo_hi], axis=0)
-            hi_ = np.max([m[i][1] for m in lo_hi], axis=0)
-            finite = np.all(np.isfinite(lo_)) and np.all(np.isfinite(hi_))
-            if finite and np.any(hi_ > lo_):
-                widths.append(i)
-        return widths
+    yield list(range(len(cands))), passes
+
+
+def _block_scores(batches, y, resid, blocks, options, phase):
+    """Block statistics of the candidates' columns and the sparse regression on every
+    `step`-th sample of them (the rows [`sindy_select`][hdjax.discover._select.sindy_select]
+    reads), from a row source: `batches` yields `(candidate indices, passes)` (see
+    [`hdjax.discover._gram.block_statistics_streamed`][]); `y` is the target, row by row.
+
+    The first pass of each batch also gathers the thinned rows (copies: a view of every
+    `step`-th row would keep each chunk's arrays alive) and each candidate's running range; a
+    candidate whose columns are not all finite, or all constant, is not scored.
+
+    **Returns:** `(sindy-selected per column, owner candidate per column, usable candidate
+    indices, BlockStatistics of the usable candidates)`.
+    """
+    step = max(1, y.size // MAX_SINDY_ROWS)
+    thin_a: list[np.ndarray] = []
+    thin: dict[int, list[np.ndarray]] = {}
+    ranges: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
+    usable: list[int] = []
+    current: list[int] = []
+
+    def tracked(idx, passes, with_base):
+        first = True
+
+        def run():
+            nonlocal first
+            for lo, hi, a, groups in passes():
+                if first:
+                    start = (-lo) % step
+                    if with_base:
+                        thin_a.append(np.array(a[start::step]))
+                    for i, g in zip(idx, groups):
+                        thin.setdefault(i, []).append(np.array(g[start::step]))
+                        ranges.setdefault(i, []).append(_column_range(g))
+                yield lo, hi, a, groups
+            first = False
+
+        return run
+
+    def batch_passes():
+        for b, (idx, passes) in enumerate(batches):
+            current[:] = idx
+            yield tracked(idx, passes, b == 0)
+
+    def select():
+        keep = []
+        for k, i in enumerate(current):
+            lo = np.min([r[0] for r in ranges[i]], axis=0)
+            hi = np.max([r[1] for r in ranges[i]], axis=0)
+            if _scorable(lo, hi):
+                keep.append(k)
+                usable.append(i)
+        return keep
 
     with phase("twist CV"):  # the candidates' columns included
-        stats = block_statistics_streamed(passes, chunks.sig.twist, blocks, usable_groups)
+        stats = block_statistics_streamed(batch_passes(), y, blocks, select)
     with phase("sindy"):
-        thin, owner = [], []
-        for i in range(len(cands)):
-            cat = np.concatenate([t[i] for t in thin_c])
+        cols, owner = [], []
+        for i in sorted(thin):
+            cat = np.concatenate(thin[i])
             for j in range(cat.shape[1]):
-                thin.append(np.ascontiguousarray(cat[:, j]))
+                cols.append(np.ascontiguousarray(cat[:, j]))
                 owner.append(i)
         selected = sindy_select(
             np.concatenate(thin_a),
             resid[::step],
-            thin,
+            cols,
             [str(o) for o in owner],
             threshold=options.sindy_threshold,
         )
-    return selected, np.asarray(owner), widths, stats
+    return selected, np.asarray(owner), usable, stats
 
 
 def score_candidates(
@@ -197,8 +196,8 @@ def score_candidates(
     options: DiscoverOptions,
     extra_columns,
     *,
-    folds=None,
-    blocks=None,
+    folds,
+    blocks,
     resamples=(),
     est=None,
     phases=None,
@@ -207,9 +206,9 @@ def score_candidates(
     """Library, spectra and per-candidate scores for one step (the families' reasons for
     offering nothing appended to `unidentified`, when given).
 
-    With `blocks` (the folds' whole contiguous blocks), every cross-validated score comes from
-    one pass of per-block Gram statistics ([`hdjax.discover._gram`][]); without, from per-fold
-    QR factors ([`hdjax.discover._select.cv_gains`][]).
+    `folds` are unions of the whole contiguous `blocks` (the block index per sample), so every
+    cross-validated score, on the standard folds and on each resampled assignment, comes from
+    one pass of per-block Gram statistics ([`hdjax.discover._gram`][]).
 
     **Returns:** `(scored, spectra, resid)`, `scored` a list of `(candidate, gain, fold gains,
     sindy-selected, gains over the resampled fold assignments)`.
@@ -243,42 +242,17 @@ def score_candidates(
         )
         if not cands:
             return [], spectra, resid
-    if blocks is not None and folds is not None:
-        if chunk:
-            selected, owner, usable, stats = _chunked_scores(
-                cands, model, chunks_of(sig, torque, chunk), resid, blocks, options, phase
-            )
-        else:
-            selected, owner, usable, stats = _streamed_scores(
-                cands, sig, torque, a, y, resid, blocks, options, phase, take
-            )
-        with phase("twist CV"):
-            total, per_fold = fold_gains(stats, _fold_of_block(blocks, folds), options.n_folds)
-            gains = list(zip(total.tolist(), per_fold))
-            resampled = [fold_gains(stats, fb, options.n_folds)[0] for fb in resamples]
+    if chunk:
+        chunks = chunks_of(sig, torque, chunk)
+        batches = _chunk_batches(cands, canonical(model), chunks)
+        target = np.asarray(chunks.sig.twist)
     else:
-        with phase("library"):
-            cols = [take(candidate_columns(c.term, sig, torque)) for c in cands]
-        with phase("sindy"):
-            flat_cols, owner = [], []
-            for i, c in enumerate(cols):
-                for j in range(c.shape[1]):
-                    flat_cols.append(c[:, j])
-                    owner.append(i)
-            selected = sindy_select(
-                a, resid, flat_cols, [str(o) for o in owner], threshold=options.sindy_threshold
-            )
-            owner = np.asarray(owner)
-        with phase("twist CV"):
-            usable = [i for i, c in enumerate(cols) if _usable(c)]
-            groups = [cols[i] for i in usable]
-            basis = fold_basis(a, y, options.n_folds, options.block, tests=folds)
-            gains = cv_gains(basis, groups)
-            if len(resamples):
-                stats = block_grams(a, groups, y, blocks)
-                resampled = [cv_gains_by_blocks(stats, fb, options.n_folds) for fb in resamples]
-            else:
-                resampled = []
+        batches, target = _memory_batches(cands, sig, torque, a, take, blocks), y
+    selected, owner, usable, stats = _block_scores(batches, target, resid, blocks, options, phase)
+    with phase("twist CV"):
+        total, per_fold = fold_gains(stats, _fold_of_block(blocks, folds), options.n_folds)
+        gains = list(zip(total.tolist(), per_fold))
+        resampled = [fold_gains(stats, fb, options.n_folds)[0] for fb in resamples]
     scored = [
         Scored(
             cands[i],

@@ -20,7 +20,6 @@ import scipy.linalg
 
 from .._custom_types import ArrayLike, Bool, Float, Int
 from .._lazy import pysindy
-from ._gram import gram_solve
 
 MAX_SINDY_ROWS = 20000
 
@@ -172,53 +171,3 @@ def sindy_select(
     coef = np.zeros(len(names))
     coef[np.flatnonzero(ok)] = np.asarray(opt.coef_).ravel()
     return coef != 0.0
-
-
-def block_grams(a: np.ndarray, groups: list[np.ndarray], y: np.ndarray, blocks: np.ndarray):
-    """Per-block Gram matrices of `[A | candidate columns | y]` (unit-scaled columns).
-
-    A fold's training statistics are the total minus its held-out blocks', so any assignment of
-    whole blocks to folds is scored without touching the samples again (see
-    [`cv_gains_by_blocks`][]). **Returns:** `(grams, p, bounds)`, grams of shape
-    `(n_blocks, q, q)`.
-    """
-    widths = [g.shape[1] for g in groups]
-    m = np.concatenate([a] + list(groups) + [y[:, None]], axis=1)
-    m = _scaled(m)
-    n_blocks = int(blocks.max()) + 1
-    grams = np.zeros((n_blocks, m.shape[1], m.shape[1]))
-    for b in range(n_blocks):
-        mb = m[blocks == b]
-        grams[b] = mb.T @ mb
-    bounds = a.shape[1] + np.cumsum([0] + widths)
-    return grams, a.shape[1], bounds
-
-
-def cv_gains_by_blocks(stats, fold_of_block: np.ndarray, n_folds: int) -> np.ndarray:
-    """Cross-validated gain of every group for one assignment of blocks to folds.
-
-    Least squares from the Gram blocks of [`block_grams`][] (normal equations on unit-scaled
-    columns, with a base column dropped where the fold's training part leaves it empty): fast
-    enough to score every candidate over many resampled assignments, for stability selection.
-    The standard assignment is scored exactly by [`cv_gains`][].
-    """
-    grams, p, bounds = stats
-    q = grams.shape[1]
-    yi = q - 1
-    total = grams.sum(axis=0)
-    base_sse = 0.0
-    sse = np.zeros(len(bounds) - 1)
-    for f in range(n_folds):
-        te = fold_of_block == f
-        g_te = grams[te].sum(axis=0)
-        g_tr = total - g_te
-        base = np.flatnonzero(np.diag(g_tr)[:p] > 1e-14)
-
-        def test_sse(idx):
-            theta = gram_solve(g_tr[np.ix_(idx, idx)], g_tr[idx, yi])
-            return g_te[yi, yi] - 2 * theta @ g_te[idx, yi] + theta @ g_te[np.ix_(idx, idx)] @ theta
-
-        base_sse += test_sse(base)
-        for i in range(len(bounds) - 1):
-            sse[i] += test_sse(np.r_[base, np.arange(bounds[i], bounds[i + 1])])
-    return 1.0 - sse / max(base_sse, 1e-300)
