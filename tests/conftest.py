@@ -30,20 +30,48 @@ if "--xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
         os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0"
     ).strip()
 
+# One JAX compilation cache for the whole test session, in a temporary folder (never the real
+# home's): the suite is compile-bound, and its two xdist workers, the CLI commands the tests
+# start in subprocesses and the programs rebuilt in-process (new closures of the same HLO) all
+# compile the same programs (measured on seven of the slowest files with `-n 2`: 195 s without
+# the cache, 169 s with it). The controller creates the folder before it starts the workers
+# (they inherit the variable) and removes it when it exits. The CLI finds it as
+# $XDG_CACHE_HOME/hdjax/jax; a test of the cache itself points XDG_CACHE_HOME elsewhere.
+# A program read while another worker is still writing it fails to load; JAX then warns and
+# compiles it (the warning is ignored in pyproject's filterwarnings). HDJAX_TEST_CACHE=0 turns
+# the cache off, to compare.
+if "HDJAX_TEST_XDG" not in os.environ:
+    os.environ["HDJAX_TEST_XDG"] = tempfile.mkdtemp(prefix="hdjax-test-xdg-")
+    atexit.register(shutil.rmtree, os.environ["HDJAX_TEST_XDG"], ignore_errors=True)
+os.environ["XDG_CACHE_HOME"] = os.environ["HDJAX_TEST_XDG"]
+TEST_CACHE_ON = os.environ.get("HDJAX_TEST_CACHE", "1") != "0"
+if TEST_CACHE_ON:
+    os.environ.pop("HDJAX_NO_CACHE", None)
+else:
+    os.environ["HDJAX_NO_CACHE"] = "1"
+
 import jax  # noqa: E402
-import pytest
+import pytest  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
 # no implicit broadcasting between arrays of different ranks: `x - mean[None, :]`, not `x - mean`
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
-# The CLI keeps JAX's compilation cache in $XDG_CACHE_HOME/hdjax: never the real home's in
-# tests, and off unless a test turns it on (tests/test_cache.py does, in a subprocess).
-_CACHE_HOME = tempfile.mkdtemp(prefix="hdjax-test-xdg-")
-atexit.register(shutil.rmtree, _CACHE_HOME, ignore_errors=True)
-os.environ["XDG_CACHE_HOME"] = _CACHE_HOME
-os.environ["HDJAX_NO_CACHE"] = "1"
+
+def use_session_cache() -> None:
+    """Point this process's JAX at the session's compilation cache, as the CLI's
+    `hdjax._cache.enable_compilation_cache` does (or turn it off with HDJAX_TEST_CACHE=0): what
+    every test starts from."""
+    path = Path(os.environ["XDG_CACHE_HOME"]) / "hdjax" / "jax" if TEST_CACHE_ON else None
+    if path is not None:
+        path.mkdir(parents=True, exist_ok=True)
+    jax.config.update("jax_compilation_cache_dir", None if path is None else str(path))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+
+use_session_cache()
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
@@ -66,39 +94,40 @@ def lara8_dir() -> Path:
 # compare. The weights are seconds measured on a 2-core machine (`--durations`, summed per
 # file); an unlisted file counts as 1 s per test.
 SLOW_FILES = {
-    "test_real_log.py": 104,
-    "test_discover_trust.py": 91,
-    "test_discover_plant.py": 82,
-    "test_fleet.py": 51,
-    "test_cli_broken_inputs.py": 45,
-    "test_plant_simulate.py": 42,
-    "test_plant_gradients.py": 41,
-    "test_discover_design.py": 40,
-    "test_docs.py": 38,
-    "test_discover_families.py": 38,
-    "test_discover_chunked.py": 36,
-    "test_discover_cli.py": 34,
-    "test_discover_loop.py": 32,
-    "test_cli_run.py": 26,
-    "test_fit_hybrid.py": 25,
-    "test_stream_commands.py": 23,
-    "test_config_data.py": 22,
-    "test_stream.py": 20,
-    "test_lara8_reference.py": 20,
-    "test_cache_discover.py": 20,
-    "test_export.py": 18,
-    "test_lstsq.py": 17,
-    "test_discover_partial_swing.py": 17,
-    "test_cli_signals.py": 17,
-    "test_readme.py": 15,
-    "test_network_model.py": 15,
-    "test_fleet_chunked.py": 15,
-    "test_export_cli.py": 15,
-    "test_discover_trust_units.py": 14,
-    "test_cache.py": 14,
-    "test_strain_compare.py": 13,
-    "test_effects_family.py": 13,
-    "test_plant_dynamics.py": 12,
+    "test_real_log.py": 84,
+    "test_discover_trust.py": 74,
+    "test_discover_plant.py": 67,
+    "test_discover_chunked.py": 41,
+    "test_plant_simulate.py": 41,
+    "test_discover_families.py": 39,
+    "test_cli_broken_inputs.py": 36,
+    "test_docs.py": 35,
+    "test_fleet.py": 34,
+    "test_plant_gradients.py": 32,
+    "test_discover_design.py": 31,
+    "test_discover_loop.py": 30,
+    "test_discover_cli.py": 28,
+    "test_discover_start_structure.py": 27,
+    "test_cli_run.py": 21,
+    "test_fit_hybrid.py": 20,
+    "test_discover_selection.py": 19,
+    "test_readme.py": 19,
+    "test_stream_commands.py": 17,
+    "test_cache_discover.py": 17,
+    "test_export.py": 16,
+    "test_config_data.py": 15,
+    "test_discover_partial_swing.py": 15,
+    "test_lara8_reference.py": 15,
+    "test_fleet_chunked.py": 14,
+    "test_discover_trust_units.py": 13,
+    "test_cli_signals.py": 13,
+    "test_stream.py": 12,
+    "test_lstsq.py": 12,
+    "test_cache.py": 10,
+    "test_strain_compare.py": 10,
+    "test_network_model.py": 9,
+    "test_network_periodic.py": 9,
+    "test_plant_dynamics.py": 9,
 }
 
 

@@ -10,7 +10,7 @@ import jax
 
 from hdjax._cache import cache_dir
 from hdjax.cli import _compilation_cache
-from tests.conftest import REPO
+from tests.conftest import REPO, use_session_cache
 
 # Runs one CLI command in a fresh process and prints the durations of JAX's backend-compile
 # events (a compilation, or on a cache hit the load of the compiled program), how many programs
@@ -71,14 +71,15 @@ def test_cache_dir_and_flag(monkeypatch, tmp_path):
     assert cache_dir() == tmp_path / "hdjax" / "jax"
     monkeypatch.setenv("XDG_CACHE_HOME", "")
     assert cache_dir() == __import__("pathlib").Path.home() / ".cache" / "hdjax" / "jax"
-    monkeypatch.delenv("HDJAX_NO_CACHE")
+    monkeypatch.delenv("HDJAX_NO_CACHE", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     try:
         assert _compilation_cache(["run", "x.toml", "--no-cache"]) == ["run", "x.toml"]
         assert jax.config.jax_compilation_cache_dir is None
         assert _compilation_cache(["run", "x.toml"]) == ["run", "x.toml"]
         assert jax.config.jax_compilation_cache_dir == str(tmp_path / "hdjax" / "jax")
-    finally:
         monkeypatch.setenv("HDJAX_NO_CACHE", "1")
-        _compilation_cache([])  # back to the test session's default: off
-    assert jax.config.jax_compilation_cache_dir is None
+        _compilation_cache([])  # HDJAX_NO_CACHE=1: off
+        assert jax.config.jax_compilation_cache_dir is None
+    finally:
+        use_session_cache()  # back to the test session's shared cache
