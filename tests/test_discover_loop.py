@@ -115,18 +115,17 @@ def test_lara8_config_runs_on_real_data(lara8_dir, tmp_path):
 
 def test_a_step_that_raises_the_test_error_is_said_loudly(monkeypatch):
     # TEST never chooses, so a step may raise it: the report must say so at that step. The
-    # TEST errors after the first call (the starting model's) are inflated tenfold.
-    from hdjax.discover import _loop
+    # TEST errors of every step (the starting model's are computed elsewhere) are inflated
+    # tenfold.
+    from hdjax.discover import _path
 
-    calls = []
-    original = _loop._test_errors
+    original = _path.test_errors
 
     def inflated(model, test, rated):
         metrics, est = original(model, test, rated)
-        calls.append(metrics.rms)
-        return (metrics._replace(rms=10 * metrics.rms) if len(calls) > 1 else metrics), est
+        return metrics._replace(rms=10 * metrics.rms), est
 
-    monkeypatch.setattr(_loop, "_test_errors", inflated)
+    monkeypatch.setattr(_path, "test_errors", inflated)
     effects, key = CASES["temperature"]
     train = synthetic_recording(1, effects, n=12000)
     test = synthetic_recording(2, effects, n=6000)
@@ -134,6 +133,6 @@ def test_a_step_that_raises_the_test_error_is_said_loudly(monkeypatch):
     assert rec.effects == [key]
     warned = [n for n in rec.notes if n.startswith("warning: step 1 (")]
     assert len(warned) == 1 and key in warned[0], rec.notes
-    monkeypatch.setattr(_loop, "_test_errors", original)
+    monkeypatch.setattr(_path, "test_errors", original)
     plain = discover(train, test, JOINT, DiscoverOptions(max_effects=1)).aux
     assert not any(n.startswith("warning: step") for n in plain.notes), plain.notes

@@ -16,7 +16,7 @@ from types import SimpleNamespace
 import pytest
 
 from hdjax import CalibrationError
-from hdjax.discover import DiscoverOptions, _loop
+from hdjax.discover import DiscoverOptions, _path, _second_start
 from hdjax.discover._pipeline import CrossValidation
 from hdjax.effects import PaperFourier
 
@@ -46,7 +46,7 @@ def test_a_tie_keeps_the_configured_structure(monkeypatch):
     # taken as always within, the configured structure stays (and its path is the one seen)
     import real_log_cases as cases
 
-    monkeypatch.setattr(_loop, "within_one_se", lambda *a: True)
+    monkeypatch.setattr(_second_start, "within_one_se", lambda *a: True)
     d = cases.draw("skew", 8, 0)
     train, test = cases._logs(d)
     r = cases.discover(train, test, cases.JOINT, cases.DiscoverOptions(max_effects=3)).aux
@@ -63,16 +63,16 @@ def test_no_second_path_without_a_motion_effect_in_the_model(monkeypatch):
     def calibrate(*a, **k):
         raise Calibrated
 
-    monkeypatch.setattr(_loop, "calibrate_baseline", calibrate)
-    run = _loop._Run(*[None] * len(_loop._Run._fields))
-    run = run._replace(options=DiscoverOptions(), phase=_loop.Phases(), say=lambda _: None)
+    monkeypatch.setattr(_second_start, "calibrate_baseline", calibrate)
+    run = _path.LoopRun(*[None] * len(_path.LoopRun._fields))
+    run = run._replace(options=DiscoverOptions(), phase=_path.Phases(), say=lambda _: None)
     cv = CrossValidation(1.0, 1.0, [], [])
     step = lambda key: SimpleNamespace(key=key)
-    found = _loop._Path([step("harmonic:theta_m:2")], None, None, cv, {}, None, [], [], [])
-    assert _loop._without_kinematic(run, None, found, cv) is found
+    found = _path.LoopPath([step("harmonic:theta_m:2")], None, None, cv, {}, None, [], [], [])
+    assert _second_start.without_kinematic(run, None, found, cv) is found
     moved = found._replace(steps=[*found.steps, step("hysteresis:torque")])
     with pytest.raises(Calibrated):
-        _loop._without_kinematic(run, None, moved, cv)
+        _second_start.without_kinematic(run, None, moved, cv)
 
 
 def test_a_second_path_that_cannot_start_is_said(monkeypatch):
@@ -81,13 +81,13 @@ def test_a_second_path_that_cannot_start_is_said(monkeypatch):
     def calibrate(*a, **k):
         raise CalibrationError("rank-deficient design")
 
-    monkeypatch.setattr(_loop, "calibrate_baseline", calibrate)
-    run = _loop._Run(*[None] * len(_loop._Run._fields))
-    run = run._replace(options=DiscoverOptions(), phase=_loop.Phases(), say=lambda _: None)
+    monkeypatch.setattr(_second_start, "calibrate_baseline", calibrate)
+    run = _path.LoopRun(*[None] * len(_path.LoopRun._fields))
+    run = run._replace(options=DiscoverOptions(), phase=_path.Phases(), say=lambda _: None)
     cv = CrossValidation(1.0, 1.0, [], [])
     step = SimpleNamespace(key="hysteresis:torque")
-    found = _loop._Path([step], None, None, cv, {}, None, [], ["a note"], [])
-    out = _loop._without_kinematic(run, None, found, cv)
+    found = _path.LoopPath([step], None, None, cv, {}, None, [], ["a note"], [])
+    out = _second_start.without_kinematic(run, None, found, cv)
     assert out.steps == found.steps and out.cv is cv and not out.start_structure
     assert out.notes[0] == "a note" and len(out.notes) == 2
     assert "not run: rank-deficient design" in out.notes[1]

@@ -11,7 +11,7 @@
 3. Compute the twist residual on TRAIN and its order spectra against both angles; build the
    candidate library ([`hdjax.discover.build_library`][]) and score every candidate by the
    share of the cross-validated twist error it removes (exactly, by Frisch-Waugh-Lovell
-   updates of per-fold QR factors), on the standard folds and on every resampled deal.
+   updates of per-block Gram statistics), on the standard folds and on every resampled deal.
 4. **Screening.** A candidate is eligible when pysindy's STLSQ selects it, it removes at least
    `min_gain` of the cross-validated twist error, and it does so in at least
    `min_stability` of the resampled fold assignments (stability selection).
@@ -36,7 +36,8 @@
    columns (eq. (9), functions of angle times speed) and the path added an effect whose
    columns depend on the speed or direction of motion, steps 3-6 run again from the structure
    without those columns, on the same folds; that path is kept when its final cross-validated
-   torque error lies beyond one standard error below the first's (`_without_kinematic`).
+   torque error lies beyond one standard error below the first's
+   ([`hdjax.discover._second_start.without_kinematic`][]).
 8. Refit on all of TRAIN, estimate torque on TEST and record the errors. TEST is never used
    to choose. At the end every added effect's amplitude gets a 95 % moving-block bootstrap
    interval over TRAIN ([`hdjax.discover._uncertainty`][]), and structure the final model
@@ -48,19 +49,15 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-from typing import NamedTuple
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .._errors import CalibrationError, ConfigError, DataError, HdjaxError, InversionError
+from .._errors import ConfigError, DataError, HdjaxError
 from .._joint import Joint
-from .._metrics import ErrorMetrics, error_metrics
 from .._recording import Recording
 from .._solution import RESULTS, Solution
 from ..effects import SEGMENT_START
-from ._aliases import alias_test, determination, find_aliases
-from ._chunked import twist_residual
 from ._closing import (
     closing_notes,
     effect_amplitudes,
@@ -68,65 +65,20 @@ from ._closing import (
     reference_findings,
     skew_estimate,
 )
-from ._decision import (
-    Trial,
-    beats_start,
-    choose,
-    eligible,
-    no_step_note,
-    qualifies,
-    rank,
-    ranking_rows,
-    speed_reading,
-    taken_back_note,
-)
-from ._folds import MEMORY_GAP, FoldPlan, fold_plan
+from ._evaluate import residual, test_errors, twist_rms
+from ._folds import MEMORY_GAP, fold_plan
 from ._options import DiscoverOptions as DiscoverOptions, stopping_rule
+from ._path import LoopRun, add_effects
 from ._pipeline import (
-    CrossValidation,
-    PipelineData,
-    calibrate,
-    canonical,
-    chunks_of,
     context_parts,
     cross_validate,
-    design,
     estimate,
-    has_path,
-    within_one_se,
 )
 from ._record import DiscoveryRecord as DiscoveryRecord, DiscoveryStep as DiscoveryStep
-from ._scores import _as_data, score_candidates as score_candidates, training_data
+from ._scores import _as_data, score_candidates as score_candidates
+from ._second_start import without_kinematic
 from ._start import calibrate_baseline as calibrate_baseline, start_table, toml_settings
-from ._timing import Phases, null_phases
-
-ARCSEC = 180.0 * 3600.0 / np.pi
-
-
-def _test_errors(model, test, rated):
-    """TEST torque errors of `model` (the pipeline's signals: gaps honoured; with a context,
-    estimated through the whole log and scored on TEST's rows). **Returns:** the metrics and
-    the estimate on TEST's rows."""
-    data = _as_data(model, test)
-    torque = data.part(estimate(model, data))
-    return error_metrics(torque, data.part(data.torque), rated), torque
-
-
-def _twist_rms(model, data, driver=None, chunk=0) -> float:
-    data = _as_data(model, data)
-    if driver is None and has_path(model):
-        driver = estimate(model, data)
-    r = data.part(_residual(model, data, driver, chunk))
-    return float(np.sqrt(np.mean(r**2)) * ARCSEC)
-
-
-def _residual(model, data: PipelineData, driver, chunk: int) -> np.ndarray:
-    """The twist residual of `model` on `data` (hysteresis driven by `driver`), the design
-    formed whole or, with `chunk`, chunk by chunk."""
-    sig, torque = data.pair(driver)
-    if chunk:
-        return twist_residual(canonical(model), chunks_of(sig, torque, chunk))
-    return np.asarray(sig.twist) - design(model, sig, torque) @ np.asarray(model.coef)
+from ._timing import Phases
 
 
 def _usable_columns(train: Recording) -> tuple[str, ...]:
@@ -184,58 +136,6 @@ def _parts(train, test, joint, options, context, notes):
     return tr, te
 
 
-class _Run(NamedTuple):
-    """What stays fixed while the loop adds effects: TRAIN's and TEST's signals, the fold
-    plan, the settings, the starting model's TEST errors, and where to time, say and note."""
-
-    data: PipelineData
-    test_data: PipelineData
-    plan: FoldPlan
-    options: DiscoverOptions
-    extra_columns: tuple[str, ...]
-    joint: Joint
-    base_metrics: ErrorMetrics
-    phase: Phases
-    say: Callable[[str], None]
-    notes: list[str]
-    unidentified: list[str]
-
-
-def _trial(run: _Run, model, cand, gain, folds_, stab, est_train, cv, phase) -> Trial:
-    """Calibrate `cand` into `model` and cross-validate the whole pipeline per fold; raises
-    `CalibrationError` or `InversionError` when it cannot."""
-    data, chunk = run.data, run.options.chunk
-    with phase("calibrate"):
-        new_model, new_est = calibrate(
-            model.with_effects(cand.term), data, run.notes, est_train, chunk
-        )
-    with phase("torque CV"):
-        new_cv = cross_validate(new_model, data, run.plan.folds_rec, cv, chunk)
-    return Trial(cand, gain, folds_, stab, new_model, new_est, new_cv)
-
-
-def _shortlist_trials(shortlist, ranking, try_one, notes, options) -> list[Trial]:
-    """Per shortlisted key, the best grid member (of the first `n_grid_tries`) that
-    calibrates to an invertible model (a hysteresis scale too sharp for its amplitude does
-    not); its cross-validated torque RMS goes into the `ranking` rows."""
-    trials = []
-    for r in shortlist:
-        for gain, cand, folds_ in r.members[: options.n_grid_tries]:
-            if gain < options.min_gain:
-                break
-            try:
-                trial = try_one(cand, gain, folds_, r.stability)
-            except (CalibrationError, InversionError) as err:
-                notes.append(f"candidate {cand.key} could not be added: {err}")
-                continue
-            for row in ranking:
-                if row["key"] == cand.key:
-                    row["cv_torque_rms"] = trial.cv_rms
-            trials.append(trial)
-            break
-    return trials
-
-
 def _start(train, test, joint, options, phase, notes, say):
     """The starting model calibrated on TRAIN, its errors on TEST, its TRAIN estimate and
     twist residual (on TRAIN's rows)."""
@@ -260,12 +160,12 @@ def _start(train, test, joint, options, phase, notes, say):
             f"longer than {MEMORY_GAP:g} s and carry across the others"
         )
     with phase("test"):
-        base_metrics, base_est = _test_errors(model, test_data, joint.rated_torque)
-        base_twist = _twist_rms(model, test_data, chunk=options.chunk)
+        base_metrics, base_est = test_errors(model, test_data, joint.rated_torque)
+        base_twist = twist_rms(model, test_data, chunk=options.chunk)
     say(f"baseline: test torque RMS {base_metrics.rms:.4g} N·m, max {base_metrics.max:.4g} N·m")
     with phase("baseline"):
         est_train = estimate(model, data)
-        resid0 = data.part(_residual(model, data, None, options.chunk))
+        resid0 = data.part(residual(model, data, None, options.chunk))
     return model, data, test_data, base_metrics, base_est, base_twist, est_train, resid0
 
 
@@ -300,13 +200,13 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
             "the range its training part calibrates, so no effect can be judged and none is added"
         )
     unidentified: list[str] = []
-    run = _Run(
+    run = LoopRun(
         data, test_data, plan, options, extra_columns, joint, base_metrics, phase, say, notes,
         unidentified,
     )  # fmt: skip
-    chosen = _add_effects(run, model, est_train, cv)
+    chosen = add_effects(run, model, est_train, cv)
     if options.fourier_order:
-        chosen = _without_kinematic(run, train, chosen, base_cv)
+        chosen = without_kinematic(run, train, chosen, base_cv)
     steps, model, est_train, cv, spectra, resid, ranking = chosen[:7]
     notes += chosen.notes
     with phase("intervals"):
@@ -366,245 +266,6 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
         fit_time_s=time.perf_counter() - t_start,
     )
     return Solution(model, RESULTS.successful, stats, aux=record)
-
-
-class _Path(NamedTuple):
-    """One path of the loop from a starting model: its steps and the state after the last,
-    the notes it wrote, and (when it starts from another structure than the configured one)
-    that start: `DiscoveryRecord.start_structure`."""
-
-    steps: list[DiscoveryStep]
-    model: object
-    est_train: np.ndarray
-    cv: CrossValidation
-    spectra: dict
-    resid: np.ndarray
-    ranking: list[dict]
-    notes: list[str]
-    unidentified: list[str]
-    start_structure: dict = {}
-
-
-def _add_effects(run: _Run, model, est_train, cv, reference: CrossValidation | None = None):
-    """The loop proper: score the library, shortlist, try, choose and add one effect per
-    step until the stopping rule ([`hdjax.discover._decision.choose`][]) or `max_effects`
-    stops it; then every step is taken back unless the path as a whole beats the starting
-    model beyond one standard error ([`hdjax.discover._decision.beats_start`][]), or
-    `reference`, when given (the configured starting model's cross-validation, for a path
-    from another starting structure).
-
-    **Returns:** a `_Path`: the steps, and the model, TRAIN estimate, cross-validation,
-    spectra, residual and ranking after the last step; its notes are its own (`run.notes`
-    and `run.unidentified` are not written).
-    """
-    run = run._replace(notes=[], unidentified=[])
-    data, plan, options, notes = run.data, run.plan, run.options, run.notes
-    steps: list[DiscoveryStep] = []
-    start: tuple = ()  # the starting model's state, kept after its scoring
-    path = [cv]  # the cross-validation after each step, the starting model's first
-    while True:
-        scored, spectra, resid = score_candidates(
-            model,
-            data,
-            options,
-            run.extra_columns,
-            folds=plan.folds,
-            blocks=plan.blocks,
-            resamples=plan.resamples,
-            est=est_train,
-            phases=run.phase,
-            unidentified=run.unidentified,
-        )
-        ranked = rank(scored, options.min_gain)
-        ranking = ranking_rows(ranked)
-        if not steps:
-            start = (model, est_train, cv, spectra, resid, ranking)
-        if len(steps) >= options.max_effects:
-            notes.append(f"stopped: reached max_effects = {options.max_effects}")
-            break
-
-        def try_one(cand, gain, folds_, stab, phase=run.phase, model=model, est=est_train, cv=cv):
-            return _trial(run, model, cand, gain, folds_, stab, est, cv, phase)
-
-        def try_key(key, ranked=ranked, try_one=try_one, cv=cv):
-            # the reading's own candidate, when the shortlist did not try it: its best member,
-            # which must pass the test the chosen trial passed
-            for r in (r for r in ranked if r.candidate.key == key):
-                try:
-                    gain, cand, folds_ = r.members[0]
-                    trial = try_one(cand, gain, folds_, r.stability, null_phases())
-                except (CalibrationError, InversionError):
-                    return None
-                return trial if qualifies(trial.cv_rms, cv.torque_rms, options) else None
-            return None
-
-        aliased = alias_test(*training_data(model, data, est_train), take=data.part)
-        shortlist = eligible(ranked, options, aliased)
-        trials = _shortlist_trials(shortlist, ranking, try_one, notes, options)
-
-        determined = determination(model, data, est_train)
-        best = choose(
-            trials, cv, plan.blocks_rec, options, notes, lambda t: determined(t.candidate.term)
-        )
-        if best is None:
-            notes.append(no_step_note(trials, shortlist, cv, options))
-            break
-        best = speed_reading(best, trials, data, notes, try_key)
-        step = _step(run, best, model, est_train, ranked, ranking, spectra)
-        model, est_train, cv = best.model, best.estimate, best.cv
-        steps.append(step)
-        path.append(cv)
-        _say_step(steps, run.base_metrics, run.say, notes)
-    gate = path if reference is None else [reference, *path[1:]]
-    if not beats_start(gate, plan.blocks_rec):
-        notes.append(taken_back_note(steps, gate))
-        run.say(notes[-1])
-        return _Path([], *start, notes, run.unidentified)
-    return _Path(steps, model, est_train, cv, spectra, resid, ranking, notes, run.unidentified)
-
-
-MOTION_FAMILIES = frozenset(
-    ("coulomb", "viscous", "skew", "stribeck", "hysteresis", "backlash", "damping")
-)
-"""Families whose columns depend on the speed or the direction of motion: on a slow sweep the
-paper's kinematic columns (functions of angle times speed) compete with them."""
-
-KINEMATIC_FREE = (
-    "the final model leaves out the starting model's kinematic columns (Song et al. eq. (9), "
-    "functions of the product of angle and speed): from the same starting structure without "
-    "them, the loop's path reaches a cross-validated torque RMS of {alt:.4g} N·m against "
-    "{own:.4g} N·m with them (beyond one standard error, paired over the held-out blocks). On "
-    "a slow motion those columns are nearly proportional to the speed, so they take up what a "
-    "speed-dependent effect (encoder skew, friction, hysteresis) explains physically; the "
-    'model written holds the structure found ([model] kinematic = "none" for hdjax run)'
-)
-
-
-def _without_kinematic(run: _Run, train, found: _Path, base_cv: CrossValidation) -> _Path:
-    """The loop's path from the starting structure without the paper's kinematic columns
-    (eq. (9)), on the same folds, kept instead of `found` when its final model's
-    cross-validated torque error lies beyond one standard error below `found`'s (and its path
-    beats the configured starting model's, `base_cv`, as every path must).
-
-    The paper's columns are functions of $\\theta\\omega$: on a slow sweep nearly linear in
-    the speed, they absorb an encoder skew or a speed-dependent friction or memory state in a
-    form that does not carry over to other speeds and angles, and the effects the loop then
-    adds compete with them. Which structure holds is a question of model choice between two
-    whole paths (a greedy step cannot reach it: removing the columns before an effect is
-    added raises the error), decided by the same cross-validation as every step, and a tie
-    keeps the configured structure.
-
-    The other path is followed only when the configured one added an effect of a family the
-    columns compete with (`MOTION_FAMILIES`): only then can they have taken up part of an
-    effect the model holds. A joint on which the configured path finds no such effect is not
-    given a second chance at one (on clean joints with white encoder noise, following it
-    whenever such a family was merely screened named effects the joints do not have).
-    """
-    options = run.options
-    if not {s.key.split(":")[0] for s in found.steps} & MOTION_FAMILIES:
-        return found
-    alt_options = dataclasses.replace(options, fourier_order=0)
-    notes: list[str] = []
-    run.say(
-        "second path: from the starting structure without the paper's kinematic columns "
-        "(kept only if its cross-validated torque error is lower beyond one standard error)"
-    )
-    try:
-        with run.phase("baseline"):
-            model = calibrate_baseline(train, run.joint, alt_options, notes)
-            est_train = estimate(model, run.data)
-        with run.phase("torque CV"):
-            cv = cross_validate(model, run.data, run.plan.folds_rec, chunk=options.chunk)
-    except (CalibrationError, InversionError) as err:
-        why = (
-            "second path (from the starting structure without the kinematic columns) not "
-            f"run: {err}"
-        )
-        run.say(why)
-        return found._replace(notes=[*found.notes, why])
-    quiet = run._replace(options=alt_options, say=lambda _: None)
-    alt = _add_effects(quiet, model, est_train, cv, reference=base_cv)
-    if not alt.steps or not qualifies(alt.cv.torque_rms, found.cv.torque_rms, options):
-        return found
-    if within_one_se(found.cv, alt.cv, run.plan.blocks_rec):
-        return found
-    change = KINEMATIC_FREE.format(alt=alt.cv.torque_rms, own=found.cv.torque_rms)
-    run.say(change)
-    with run.phase("test"):
-        metrics = _test_errors(model, run.test_data, run.joint.rated_torque)[0]
-    start = dict(
-        label="starting model without its kinematic columns",
-        note=change,
-        rms=metrics.rms,
-        max=metrics.max,
-        cv_torque_rms=cv.torque_rms,
-        cv_twist_rms_arcsec=cv.twist_rms_arcsec,
-    )
-    run.say(
-        f"{start['label']}: test torque RMS {metrics.rms:.4g} N·m, cross-validated torque RMS "
-        f"{cv.torque_rms:.4g} N·m"
-    )
-    for k in range(1, len(alt.steps) + 1):
-        _say_step(alt.steps[:k], run.base_metrics, run.say, [])
-    return alt._replace(notes=[change, *notes, *alt.notes], start_structure=start)
-
-
-def _step(run: _Run, best, model, est_train, ranked, ranking, spectra) -> DiscoveryStep:
-    """The step that adds `best` to `model`: its aliases (on the signals the candidates were
-    scored on, the model before this step) and its TEST errors."""
-    cand, data, phase = best.candidate, run.data, run.phase
-    with phase("aliases"):
-        others = [
-            (r.candidate.key, r.candidate.term) for r in ranked[:10] if r.candidate.key != cand.key
-        ]
-        aliases = find_aliases(
-            cand.term, others, *training_data(model, data, est_train), take=data.part
-        )
-    with phase("test"):
-        metrics, est = _test_errors(best.model, run.test_data, run.joint.rated_torque)
-        twist_rms = _twist_rms(best.model, run.test_data, chunk=run.options.chunk)
-    return DiscoveryStep(
-        key=cand.key,
-        family=cand.family,
-        term=cand.term,
-        model=best.model,
-        torque_estimate=est,
-        fold_gains=[float(x) for x in best.fold_gains],
-        test=metrics,
-        twist_rms_arcsec=twist_rms,
-        cv_gain=best.gain,
-        cv_torque_rms=best.cv.torque_rms,
-        cv_twist_rms_arcsec=best.cv.twist_rms_arcsec,
-        stability=best.stability,
-        ranking=ranking,
-        spectra=spectra,
-        aliases=aliases,
-    )
-
-
-def _say_step(steps, base_metrics, say, notes) -> None:
-    """The progress line of the last step; a loud warning when TEST disagrees with it."""
-    s = steps[-1]
-    say(
-        f"step {len(steps)}: added {s.key} (CV twist gain {s.cv_gain:.1%}, stability "
-        f"{s.stability:.0%}, CV torque {s.cv_torque_rms:.4g} N·m); test torque RMS "
-        f"{s.test.rms:.4g} N·m, max {s.test.max:.4g} N·m"
-        + (
-            "; TRAIN cannot tell it apart from " + ", ".join(a["key"] for a in s.aliases)
-            if s.aliases
-            else ""
-        )
-    )
-    before = steps[-2].test.rms if len(steps) > 1 else base_metrics.rms
-    if s.test.rms > before:
-        # TEST never chooses, so a step it disagrees with stays: say so, loudly
-        rise = (
-            f"warning: step {len(steps)} ({s.key}) raised the TEST torque RMS from "
-            f"{before:.4g} to {s.test.rms:.4g} N·m (+{s.test.rms / before - 1:.1%}), "
-            "although cross-validation on TRAIN lowered the torque error: TRAIN and TEST differ"
-        )
-        notes.append(rise)
-        say(rise)
 
 
 __all__ = [

@@ -13,7 +13,7 @@ from .._recording import Recording
 from ..compliance import ComplianceModel
 from ..compliance.internal import CalibrationData, prepare
 from ..effects import AbstractTerm
-from ._loop import _test_errors
+from ._evaluate import test_errors
 from ._options import DiscoverOptions
 from ._pipeline import calibrate, estimate
 from ._scores import _as_data
@@ -37,7 +37,7 @@ def refit_structure(
     base = calibrate_baseline(train, joint, options, notes)
     data = _as_data(base, train)
     model, _ = calibrate(base.with_effects(*terms), data, notes, estimate(base, data))
-    return _test_errors(model, test, joint.rated_torque)[0]
+    return test_errors(model, test, joint.rated_torque)[0]
 
 
 def residual_spectra(

@@ -17,7 +17,7 @@ from .._solution import Solution
 from ..compliance.internal import CalibrationData
 from ..config import save_model
 from ..report import ResultDir
-from ._loop import ARCSEC
+from ._evaluate import ARCSEC
 from ._options import DiscoverOptions, stopping_rule
 from ._pipeline import PipelineData, design, pipeline_signals
 from ._record import DiscoveryRecord

@@ -35,7 +35,7 @@ from .._joint import Joint
 from .._recording import Recording
 from .._solution import Solution
 from ..compliance import RecordingStream, calibrate_stream
-from ._loop import _test_errors
+from ._evaluate import test_errors
 from ._pipeline import canonical, has_path
 
 SELECT_BLOCKS = 20
@@ -124,9 +124,9 @@ def refit_on_whole_log(
             "errors are the selection's"
         )
         return _with(solution, record, notes, selection | {"refit": "selection"})
-    base_m, base_est = _test_errors(base, test, joint.rated_torque)
+    base_m, base_est = test_errors(base, test, joint.rated_torque)
     final_m, final_est = (
-        _test_errors(final, test, joint.rated_torque)
+        test_errors(final, test, joint.rated_torque)
         if record.steps
         else (
             base_m,
