@@ -60,15 +60,16 @@ jax.config.update("jax_numpy_rank_promotion", "raise")
 
 
 def use_session_cache() -> None:
-    """Point this process's JAX at the session's compilation cache, as the CLI's
-    `hdjax._cache.enable_compilation_cache` does (or turn it off with HDJAX_TEST_CACHE=0): what
-    every test starts from."""
-    path = Path(os.environ["XDG_CACHE_HOME"]) / "hdjax" / "jax" if TEST_CACHE_ON else None
-    if path is not None:
-        path.mkdir(parents=True, exist_ok=True)
-    jax.config.update("jax_compilation_cache_dir", None if path is None else str(path))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    """Point this process's JAX at the session's compilation cache, $XDG_CACHE_HOME/hdjax/jax,
+    with the CLI's own settings (or turn it off with HDJAX_TEST_CACHE=0): what every test
+    starts from. (jaxtyping's import hook is installed before this file runs, so hdjax imported
+    here is checked as everywhere.)"""
+    from hdjax._cache import disable_compilation_cache, enable_compilation_cache
+
+    if TEST_CACHE_ON:
+        enable_compilation_cache()
+    else:
+        disable_compilation_cache()
 
 
 use_session_cache()

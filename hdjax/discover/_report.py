@@ -17,9 +17,9 @@ from .._solution import Solution
 from ..compliance.internal import CalibrationData
 from ..config import save_model
 from ..report import ResultDir
-from ._evaluate import ARCSEC
+from ._evaluate import ARCSEC, residual
 from ._options import DiscoverOptions, stopping_rule
-from ._pipeline import PipelineData, design, pipeline_signals
+from ._pipeline import PipelineData, pipeline_signals
 from ._record import DiscoveryRecord
 from ._refit import residual_spectra
 
@@ -103,12 +103,11 @@ def _plot_residual_vs_angle(model, data: PipelineData, title, path):
     plt = pyplot()
 
     # the loop's own TEST signals (gaps honoured), so the design reuses its compiled programs
-    sig, torque = data.pair()
-    r = (np.asarray(sig.twist) - design(model, sig, torque) @ np.asarray(model.coef)) * ARCSEC
+    r = residual(model, data, None, 0) * ARCSEC
     idx = np.linspace(0, r.size - 1, min(r.size, 6000)).astype(int)
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
     for ax, name in zip(axes, ("theta_m", "theta_l")):
-        th = np.mod(np.asarray(sig.get(name))[idx], 2 * np.pi)
+        th = np.mod(np.asarray(data.sig.get(name))[idx], 2 * np.pi)
         ax.plot(th, r[idx], ".", ms=1.5, alpha=0.5)
         ax.set_xlabel(f"{name} mod 2π [rad]")
         ax.set_ylabel("twist residual [arcsec]")

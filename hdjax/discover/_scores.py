@@ -221,8 +221,8 @@ def score_candidates(
         sig, torque = training_data(model, data, est)
         y = take(sig.twist)
         if chunk:
-            a = None
-            resid = twist_residual(canonical(model), chunks_of(sig, torque, chunk))
+            a, chunks = None, chunks_of(sig, torque, chunk)
+            resid = twist_residual(canonical(model), chunks)
         else:
             a_full = take(design(model, sig, torque))
             active = np.asarray(model.active)
@@ -243,7 +243,6 @@ def score_candidates(
         if not cands:
             return [], spectra, resid
     if chunk:
-        chunks = chunks_of(sig, torque, chunk)
         batches = _chunk_batches(cands, canonical(model), chunks)
         target = np.asarray(chunks.sig.twist)
     else:
