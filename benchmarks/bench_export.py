@@ -63,8 +63,9 @@ from hdjax.compliance import (  # noqa: E402
     estimate_torque,
     estimate_torque_single,
 )
-from hdjax.config import build_dataset, load_experiment, save_model  # noqa: E402
-from hdjax.pipelines import _paper as P  # noqa: E402
+from hdjax.config import load_experiment  # noqa: E402
+from hdjax.modelfile import save_model  # noqa: E402
+from hdjax.pipelines import build_dataset, internal as P  # noqa: E402
 
 JOINT = hdjax.Joint(ratio=160.0, rated_torque=400.0, name="bench")
 PAPER_US_PER_ESTIMATE = 9.232e-3 / 100 * 1e6  # Song et al. 2019: 9.232 ms per 100 estimates

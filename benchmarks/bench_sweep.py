@@ -30,7 +30,7 @@ def main() -> None:
     if not args.no_loop:
         from hdjax import Joint
         from hdjax.compliance import ComplianceModel, calibrate_lstsq
-        from hdjax.config import synthetic_recording
+        from hdjax.pipelines import synthetic_recording
         from hdjax.pipelines._paper import stacked_signals
 
         joint = Joint(ratio=160.0, rated_torque=400.0)

@@ -23,8 +23,8 @@ import jax
 import numpy as np
 
 import hdjax
-from hdjax.config import build_dataset, load_experiment
-from hdjax.pipelines import _paper as P
+from hdjax.config import load_experiment
+from hdjax.pipelines import build_dataset, internal as P
 from hdjax.reference import (
     detect_holds,
     fit_offset_with_payload,

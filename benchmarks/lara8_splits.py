@@ -80,7 +80,8 @@ def fts_parts():
     options)`, the whole log (fresh wrench rows) for the loop's `context`."""
     import copy
 
-    from hdjax.config import build_dataset, load_experiment
+    from hdjax.config import load_experiment
+    from hdjax.pipelines import build_dataset
 
     exp = load_experiment(FTS)
     own = build_dataset(exp)

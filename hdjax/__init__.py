@@ -17,8 +17,10 @@ Sub-packages (imported on first access, so `import hdjax` stays light):
   regression term, candidates).
 - `hdjax.strain`: Hashimoto et al. (1993) strain-gauge sensing and joint torque control.
 - `hdjax.reference`: joint-torque references from a force/torque sensor and the arm's Jacobian.
-- `hdjax.pipelines`: the experiment pipelines (the paper run, method comparison, periodic
-  features) above the model packages.
+- `hdjax.pipelines`: the experiment pipelines (an experiment's data and model, the paper run,
+  method comparison, periodic features) above the model packages.
+- `hdjax.modelfile`: a calibrated model (and network) saved to and loaded from one file.
+- `hdjax.config`: experiment files, parsed and validated (no model built, no data read).
 - `hdjax.report`: metrics, figures and reports.
 - `hdjax.export`: a calibrated model as dependency-free C code with a per-sample step.
 """
@@ -81,6 +83,7 @@ _SUBPACKAGES = (
     "strain",
     "reference",
     "pipelines",
+    "modelfile",
     "report",
     "config",
     "export",

@@ -22,7 +22,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from hdjax import Joint, save_csv
 from hdjax.cli import main
-from hdjax.config import synthetic_recording
+from hdjax.pipelines import synthetic_recording
 
 from .discover_data import synthetic_recording as discover_recording
 from .helpers import tiny_config
@@ -1405,7 +1405,7 @@ def test_estimate_survives_edited_model_with_valid_checksum(
     scratch, capsys, stop_before_work, path, value
 ):
     """A model file edited by hand (or by another tool) with its checksum recomputed."""
-    from hdjax.config._saved_model import _checksum
+    from hdjax.modelfile._saved_model import _checksum
 
     rel = "res/model.json"
     doc = json.loads((scratch / rel).read_text())

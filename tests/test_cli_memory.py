@@ -6,7 +6,7 @@ import pytest
 import hdjax._memory as preflight
 from hdjax import Joint, save_csv
 from hdjax.cli import main
-from hdjax.config import synthetic_recording
+from hdjax.pipelines import synthetic_recording
 
 
 @pytest.fixture

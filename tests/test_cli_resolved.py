@@ -5,7 +5,8 @@ import tomllib
 
 from hdjax import Joint, save_csv
 from hdjax.cli import main
-from hdjax.config import load_experiment, synthetic_recording, with_absolute_paths
+from hdjax.config import load_experiment, with_absolute_paths
+from hdjax.pipelines import synthetic_recording
 
 CONFIG = """
 [experiment]

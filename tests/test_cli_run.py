@@ -11,7 +11,8 @@ import hdjax
 from hdjax import Joint, save_csv
 from hdjax.cli import main
 from hdjax.compliance import estimate_torque
-from hdjax.config import load_model, synthetic_recording
+from hdjax.modelfile import load_model
+from hdjax.pipelines import synthetic_recording
 
 CONFIG = """
 [experiment]

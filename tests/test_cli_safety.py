@@ -8,7 +8,7 @@ import pytest
 
 from hdjax import Joint, save_csv
 from hdjax.cli import main
-from hdjax.config import synthetic_recording
+from hdjax.pipelines import synthetic_recording
 
 from .helpers import tiny_config
 

@@ -9,7 +9,7 @@ from hdjax import RESULTS, Joint
 from hdjax.cli import main
 from hdjax.compliance import ComplianceModel, calibrate_lstsq, estimate_torque_arrays
 from hdjax.compliance._nested import batched_estimates, estimable, member_message, nested_fit
-from hdjax.config import synthetic_recording
+from hdjax.pipelines import synthetic_recording
 from hdjax.pipelines._paper import stacked_signals
 
 JOINT = Joint(ratio=160.0, rated_torque=400.0)

@@ -7,7 +7,8 @@ import pytest
 
 from hdjax import ConfigError, DataError, Joint, save_csv
 from hdjax.cli import main
-from hdjax.config import build_dataset, load_experiment, synthetic_recording
+from hdjax.config import load_experiment
+from hdjax.pipelines import build_dataset, synthetic_recording
 
 JOINT = Joint(ratio=160.0, rated_torque=400.0)
 

@@ -8,7 +8,8 @@ import pytest
 
 from hdjax import DataError, Joint, ModelMismatchError
 from hdjax.compliance import ComplianceModel, calibrate_lstsq, estimate_torque
-from hdjax.config import check_compatible, load_model, save_model, synthetic_recording
+from hdjax.modelfile import check_compatible, load_model, save_model
+from hdjax.pipelines import synthetic_recording
 
 JOINT = Joint(ratio=160.0, rated_torque=400.0)
 

@@ -15,9 +15,9 @@ import pytest
 import hdjax
 from hdjax.cli import main
 from hdjax.compliance import calibrate_lstsq
-from hdjax.config import load_model
 from hdjax.discover._pipeline import canonical
 from hdjax.discover._subsample import load_selection, selection_blocks
+from hdjax.modelfile import load_model
 
 from .discover_data import ARCSEC, synthetic_recording
 

@@ -24,8 +24,8 @@ from jaxtyping import Array, Float
 import hdjax
 from hdjax import effects, export, plant
 from hdjax.compliance import ComplianceModel, estimate_torque, signals_from_recording
-from hdjax.config import load_model, save_model
 from hdjax.discover import DiscoverOptions, LibraryOptions, discover, report_dict
+from hdjax.modelfile import load_model, save_model
 
 JOINT = hdjax.Joint(ratio=160, rated_torque=400)
 

@@ -282,7 +282,7 @@ def test_a_term_reading_a_private_signal_is_refused():
 def test_the_check_program_passes_its_vectors_and_fails_a_wrong_one(tmp_path, compiler):
     import subprocess
 
-    from hdjax.config import SavedModel
+    from hdjax.modelfile import SavedModel
 
     model = MODELS["every_effect"]()
     saved = SavedModel(JOINT, model, None, {}, {})
@@ -426,7 +426,7 @@ def test_the_count_conversion_is_the_readers_at_extreme_counts(tmp_path, compile
 
 
 def test_counts_per_rev_come_from_the_joint_or_the_options():
-    from hdjax.config import SavedModel
+    from hdjax.modelfile import SavedModel
 
     bits = dataclasses.replace(JOINT, encoder_bits_motor=21, encoder_bits_load=19)
     model = MODELS["paper_shared"]()

@@ -11,7 +11,7 @@ import hdjax
 from hdjax import effects, export
 from hdjax.cli import main
 from hdjax.compliance import ComplianceModel
-from hdjax.config import save_model
+from hdjax.modelfile import save_model
 
 from .helpers import JOINT, sim_recording
 from .test_export import MODELS, NoCTerm, _network, _with_truth

@@ -13,7 +13,8 @@ from hdjax._metrics import error_metrics
 from hdjax.cli import main
 from hdjax.cli._fleet import WORKER_ENV, worker_env
 from hdjax.compliance import ComplianceModel, calibrate_lstsq, estimate_torque
-from hdjax.config import save_model, synthetic_recording
+from hdjax.modelfile import save_model
+from hdjax.pipelines import synthetic_recording
 
 from . import discover_data
 from .helpers import assert_figure

@@ -13,10 +13,11 @@ import pytest
 
 import hdjax
 from hdjax.compliance import ComplianceModel, calibrate_lstsq
-from hdjax.config import save_model, synthetic_recording
 from hdjax.effects import TwistHysteresis, twist_compliance
 from hdjax.fleet import load_manifest
 from hdjax.fleet._task import run_task
+from hdjax.modelfile import save_model
+from hdjax.pipelines import synthetic_recording
 from hdjax.pipelines._paper import stacked_signals
 
 from . import discover_data

@@ -76,3 +76,58 @@ def test_the_check_sees_a_private_import(tmp_path):
         "compliance.internal ['_design']",
         "compliance._shape ['_shape']",
     ]
+
+
+def imported_packages(package: str, root: Path = ROOT) -> dict[str, list[str]]:
+    """The other hdjax packages that `package`'s modules import (at any depth, lazily or not),
+    each with where."""
+    found: dict[str, list[str]] = {}
+    for path in sorted((root / package).rglob("*.py")):
+        rel = path.relative_to(root).parts
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ImportFrom):
+                parts = _target(rel, node)
+                # `from .. import plant` names the packages themselves
+                relative_root = node.level and not node.module and not parts
+                tops = [a.name for a in node.names] if relative_root else parts[:1]
+            elif isinstance(node, ast.Import):
+                tops = [a.name.split(".")[1] for a in node.names if a.name.startswith("hdjax.")]
+            else:
+                continue
+            for top in tops:
+                if top != package and not top.startswith("_"):
+                    found.setdefault(top, []).append(f"{path.name}:{node.lineno}")
+    return found
+
+
+# the [reference] table's checks belong to the package that reads references
+CONFIG_MAY_IMPORT = {"reference"}
+
+
+def test_configuration_only_parses_and_validates():
+    """`hdjax.config` builds no model and reads no data: it imports none of the model
+    packages (compliance, network, plant, ...) nor the pipelines that build from them."""
+    found = imported_packages("config")
+    extra = {k: v for k, v in found.items() if k not in CONFIG_MAY_IMPORT}
+    assert not extra, f"hdjax.config imports {extra}; build models in hdjax.pipelines"
+
+
+def test_the_layering_check_sees_a_lazy_import(tmp_path):
+    pkg = tmp_path / "hdjax" / "config"
+    pkg.mkdir(parents=True)
+    (pkg / "_a.py").write_text(
+        "from .._errors import ConfigError\n"
+        "from ..reference import check_reference\n"
+        "from ._b import x\n"
+        "from .. import network, _io\n"
+        "def f():\n"
+        "    from ..compliance import ComplianceModel\n"
+        "    import hdjax.plant\n"
+    )
+    found = imported_packages("config", tmp_path / "hdjax")
+    assert found == {
+        "reference": ["_a.py:2"],
+        "network": ["_a.py:4"],
+        "compliance": ["_a.py:6"],
+        "plant": ["_a.py:7"],
+    }

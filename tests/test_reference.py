@@ -511,7 +511,8 @@ def test_reference_in_an_experiment_file(tmp_path):
 
 def test_a_column_reference_is_named_in_the_dataset(tmp_path):
     from hdjax import save_csv
-    from hdjax.config import build_dataset, experiment_from_dict, synthetic_recording
+    from hdjax.config import experiment_from_dict
+    from hdjax.pipelines import build_dataset, synthetic_recording
 
     joint = {"ratio": 100, "rated_torque": 50}
     rec = synthetic_recording(hdjax.Joint(**joint), 200, seed=0)

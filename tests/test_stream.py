@@ -17,8 +17,8 @@ from hdjax.compliance import (
     calibrate_lstsq,
     calibrate_stream,
 )
-from hdjax.config import synthetic_recording
 from hdjax.effects import SEGMENT_START, TwistHysteresis, twist_compliance
+from hdjax.pipelines import synthetic_recording
 from hdjax.pipelines._paper import stacked_signals
 
 JOINT = hdjax.Joint(ratio=100.0, rated_torque=100.0)

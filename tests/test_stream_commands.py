@@ -9,8 +9,8 @@ import pytest
 import hdjax
 from hdjax.cli import main
 from hdjax.compliance import RecordingStream
-from hdjax.config import synthetic_recording
 from hdjax.network import build_features
+from hdjax.pipelines import synthetic_recording
 from hdjax.pipelines._streamed import stream_features
 
 JOINT = hdjax.Joint(ratio=160.0, rated_torque=400.0)
@@ -55,7 +55,7 @@ def _no_whole_loads(monkeypatch):
         raise AssertionError("a streamed run loaded a whole recording")
 
     for target in (
-        "hdjax.config._dataset._load",
+        "hdjax.pipelines._dataset._load",
         "hdjax._formats.load",
         "hdjax._formats.load_csv",
         "hdjax._io.load_csv",

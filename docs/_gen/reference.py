@@ -382,6 +382,7 @@ def public_packages() -> list[str]:
         "effects",
         "reference",
         "pipelines",
+        "modelfile",
         "report",
         "config",
         "cli",

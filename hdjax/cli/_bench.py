@@ -6,7 +6,8 @@ from .._errors import ConfigError
 from .._joint import Joint
 from ..compliance import ComplianceModel, calibrate_lstsq, estimate_torque
 from ..compliance.internal import nested_fit
-from ..config import check_memory, synthetic_recording
+from ..config import check_memory
+from ..pipelines import synthetic_recording
 from ..pipelines.internal import PAPER_MS_PER_100, stacked_signals
 from ._common import Progress, add_command, add_quiet
 

@@ -12,8 +12,8 @@ from .._io import atomic_write_bytes, csv_bytes
 from .._joint import load_joint
 from .._memory import check_read_memory
 from .._metrics import error_metrics
-from ..config import check_compatible, load_model
-from ..config.internal import angle_ratio_mismatch
+from ..modelfile import check_compatible, load_model
+from ..modelfile.internal import angle_ratio_mismatch
 from ..network import predict_torque as net_estimate
 from ..report import check_output_file
 from ._common import (

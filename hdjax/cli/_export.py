@@ -87,8 +87,8 @@ def command(args, parser) -> int:
     """Run `hdjax export` (see the module docstring)."""
     from .._errors import ConfigError
     from .._formats import load_recording
-    from ..config import check_compatible, load_model
     from ..export import check_counts_per_rev, export_files
+    from ..modelfile import check_compatible, load_model
     from ..report import ResultDir
 
     progress = Progress(args.quiet)

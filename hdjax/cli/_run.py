@@ -10,18 +10,11 @@ from .. import compliance
 from .._errors import ConfigError, InversionError
 from .._io import csv_bytes
 from ..compliance import calibration_messages, check_invertible
-from ..config import (
-    StreamedDataset,
-    build_dataset,
-    dumps_toml,
-    load_experiment,
-    preflight,
-    save_model,
-    with_absolute_paths,
-)
-from ..config.internal import check_angles
+from ..config import dumps_toml, load_experiment, with_absolute_paths
+from ..modelfile import save_model
 from ..network import predict_torque as net_estimate
-from ..pipelines import internal as P
+from ..pipelines import StreamedDataset, build_dataset, internal as P, preflight
+from ..pipelines.internal import check_angles
 from ..report import (
     ResultDir,
     environment,

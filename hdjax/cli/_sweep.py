@@ -13,17 +13,14 @@ from ..compliance.internal import batched_estimates, estimable, member_message, 
 from ..config import (
     Experiment,
     apply_setting,
-    build_dataset,
     check_sweep_setting,
     dumps_toml,
     load_experiment,
     parse_value,
-    preflight,
     with_absolute_paths,
 )
-from ..config.internal import check_angles
-from ..pipelines import internal as P
-from ..pipelines.internal import StreamedEstimate
+from ..pipelines import build_dataset, internal as P, preflight
+from ..pipelines.internal import StreamedEstimate, check_angles
 from ..reference import describe_column_reference
 from ..report import environment, find_knee, markdown_table, sweep_figure
 from ..report.internal import KNEE_RULE

@@ -17,7 +17,6 @@ from collections.abc import Callable, Mapping
 from .._errors import ConfigError, check_keys, did_you_mean
 from .._io import check_encoding
 from .._joint import Joint
-from ..compliance import ComplianceModel
 from ..reference import check_reference
 
 Check = Callable[[str, object], object]
@@ -442,12 +441,6 @@ def joint_of(cfg: Mapping) -> Joint:
     return Joint.from_dict(cfg["joint"])
 
 
-def model_of(cfg: Mapping, joint: Joint, scale: float) -> ComplianceModel:
-    """The uncalibrated [`hdjax.compliance.ComplianceModel`][] of a resolved config's `[model]`
-    table (Song et al. 2019, eqs. (7)-(10)), with motor currents divided by `scale`."""
-    return paper_model(cfg["model"], joint, scale)
-
-
 STRUCTURE_KEYS = (  # the [model] settings that set the paper model's structure
     "n_segments",
     "poly_order",
@@ -460,12 +453,12 @@ STRUCTURE_KEYS = (  # the [model] settings that set the paper model's structure
 )
 
 
-def paper_model(table: Mapping, joint: Joint, scale: float) -> ComplianceModel:
-    """The paper's model structure (Song et al. 2019, eqs. (7)-(10)) from a validated `[model]`
-    table; keys it does not hold take `ComplianceModel.paper`'s defaults (a fleet manifest's
-    table holds fewer). Motor currents are divided by `scale`."""
+def structure_settings(table: Mapping) -> dict:
+    """The keyword arguments of `hdjax.compliance.ComplianceModel.paper` (Song et al. 2019,
+    eqs. (7)-(10)) that a validated `[model]` table sets (`STRUCTURE_KEYS`, those it holds: a
+    fleet manifest's table holds fewer, and the others take `paper`'s defaults)."""
     kw = {k: table[k] for k in STRUCTURE_KEYS if k in table}
     for k in ("harmonic_orders_m", "harmonic_orders_l"):
         if k in kw:
             kw[k] = tuple(kw[k])
-    return ComplianceModel.paper(joint, current_scale=scale, **kw)
+    return kw

@@ -15,7 +15,7 @@ from .._joint import Joint
 from .._plotting import fixed_margins, pyplot
 from .._solution import Solution
 from ..compliance.internal import CalibrationData
-from ..config import save_model
+from ..modelfile import save_model
 from ..report import ResultDir
 from ._evaluate import ARCSEC, residual
 from ._options import DiscoverOptions, stopping_rule
@@ -347,7 +347,7 @@ def write_report_into(
     """[`write_report`][] into an open [`hdjax.report.ResultDir`][] (the command line's):
     the model and the report first, then the figures in one pass, `report.md` naming them
     last. The model file is the one `hdjax estimate`, `hdjax run --model` and `hdjax export`
-    read ([`hdjax.config.save_model`][]); `experiment`, when given, is written as
+    read ([`hdjax.modelfile.save_model`][]); `experiment`, when given, is written as
     `experiment.toml` (the lines that reproduce the final model with `hdjax run`, from
     `hdjax.discover._experiment`); `report.md` ends with the commands that use them."""
     d = report_dict(solution, extra=extra)

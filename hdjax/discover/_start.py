@@ -16,7 +16,7 @@ from .._recording import Recording
 from .._solution import Solution
 from ..compliance import ComplianceModel, merge_sparse_segments
 from ..compliance.internal import failure_message
-from ..config.internal import STRUCTURE_KEYS, paper_model
+from ..config.internal import structure_settings
 from ._options import DiscoverOptions
 from ._pipeline import (
     PipelineData,
@@ -29,9 +29,12 @@ from ._pipeline import (
 from ._scores import _as_data
 
 
-def structure_table(table: Mapping) -> dict:
-    """The structure settings of a `[model]` table (see `STRUCTURE_KEYS`), those it holds."""
-    return {k: table[k] for k in STRUCTURE_KEYS if k in table}
+def paper_model(table: Mapping, joint: Joint, scale: float) -> ComplianceModel:
+    """The paper's model structure (Song et al. 2019, eqs. (7)-(10)) from a validated `[model]`
+    table, the starting model of `hdjax run` and of the loop; keys it does not hold take
+    `ComplianceModel.paper`'s defaults (a fleet manifest's table holds fewer). Motor currents
+    are divided by `scale`."""
+    return ComplianceModel.paper(joint, current_scale=scale, **structure_settings(table))
 
 
 def fallback_tables(table: Mapping) -> list[dict]:
@@ -39,7 +42,7 @@ def fallback_tables(table: Mapping) -> list[dict]:
     coefficients (`per_segment = false`), then without the current polynomial
     (`poly_order = 0`), then without the kinematic-error term (`kinematic = "none"`); each
     one only once."""
-    first = structure_table(table)
+    first = structure_settings(table)
     chain = [first, {**first, "per_segment": False}]
     chain.append({**chain[-1], "poly_order": 0})
     chain.append({**chain[-1], "kinematic": "none", "fourier_order": 0})

@@ -1,7 +1,7 @@
 """The files of an export: the estimator, its README with the calling sequence, the test vectors
 and a small C program that checks a build against them.
 
-[`export_files`][] turns a saved model ([`hdjax.config.SavedModel`][]) into these files, as
+[`export_files`][] turns a saved model ([`hdjax.modelfile.SavedModel`][]) into these files, as
 bytes by name; `hdjax export` writes them into a result folder.
 """
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 from .. import __version__
 from .._errors import ConfigError, ExportError, ModelMismatchError
 from .._recording import Recording
-from ..config import SavedModel
+from ..modelfile import SavedModel
 from ._assemble import FLAGS, CCode
 from ._compliance import compliance_c
 from ._counts import ENCODERS, counts_c, counts_per_rev
@@ -303,7 +303,7 @@ def export_files(
 
     **Arguments:**
 
-    - `saved`: a [`hdjax.config.SavedModel`][] (`hdjax.config.load_model`).
+    - `saved`: a [`hdjax.modelfile.SavedModel`][] (`hdjax.modelfile.load_model`).
     - `method`: `"model"` (the compliance model) or `"network"`.
     - `precision`: `"double"` or `"single"`.
     - `causal`: export the causal form of a velocity option that reads ahead (see

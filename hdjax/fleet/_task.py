@@ -27,9 +27,10 @@ from ..compliance import (
     estimate_torque,
 )
 from ..compliance.internal import peak_abs
-from ..config import check_compatible, load_model
-from ..config.internal import paper_model, ratio_mismatch
 from ..discover import DiscoverOptions, discover
+from ..discover.internal import paper_model
+from ..modelfile import check_compatible, load_model
+from ..modelfile.internal import ratio_mismatch
 from ..pipelines.internal import ErrorSums, model_estimates
 
 ARCSEC = 648000.0 / np.pi

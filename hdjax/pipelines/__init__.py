@@ -14,6 +14,11 @@ and tabulate.
   [`hdjax.pipelines.paper_joint`][]; the strain-gauge / deformation feedback comparison
   [`hdjax.pipelines.compare_feedback`][]; everything at once with its figures:
   [`hdjax.pipelines.reproduce_figures`][].
+- [`hdjax.pipelines.build_dataset`][]: the calibration and test recordings of an experiment
+  (plant scenarios, files through a column map, or synthetic); with `[fit] chunk` on files a
+  [`hdjax.pipelines.StreamedDataset`][] that reads them chunk by chunk.
+- [`hdjax.pipelines.preflight`][]: the checks of a resolved config (or one `--set` or sweep
+  member) before any work: the model can be built, the data fits in memory.
 """
 
 from ._compare import (
@@ -23,10 +28,16 @@ from ._compare import (
     format_table as format_table,
     plot_comparison as plot_comparison,
 )
+from ._dataset import (
+    Dataset as Dataset,
+    build_dataset as build_dataset,
+    synthetic_recording as synthetic_recording,
+)
 from ._periodic import (
     format_periodic_table as format_periodic_table,
     periodic_features_effect as periodic_features_effect,
 )
+from ._preflight import preflight as preflight
 from ._strain_compare import (
     CaseResult as CaseResult,
     Comparison as Comparison,
@@ -45,3 +56,4 @@ from ._strain_experiments import (
     step_response as step_response,
 )
 from ._strain_figures import reproduce_figures as reproduce_figures
+from ._streamed_dataset import StreamedDataset as StreamedDataset

@@ -26,16 +26,14 @@ from ..compliance import (
     calibrate_stream,
     estimate_torque,
 )
-from ..config import check_compatible, load_model
-from ..config.internal import PartStream, model_of
 from ..discover import calibrate_start, calibrate_structure
+from ..modelfile import check_compatible, load_model
 from . import _streamed as S
+from ._streamed_dataset import PartStream
 
 PAPER_MS_PER_100 = {"model": 9.232, "network": 25.442}
 """Song et al. Section IV.B: time to estimate 100 torques on an i7-7700H [ms]."""
 
-build_model = model_of
-"""The uncalibrated compliance model of a resolved config (`config._schema.model_of`)."""
 
 PAPER_ERRORS = {
     "model": {

@@ -1,7 +1,7 @@
 r"""The steps of an experiment on streamed parts: estimates and errors accumulated chunk by chunk.
 
 With `[fit] chunk > 0` an experiment's files arrive as [`hdjax.compliance.RecordingStream`][]s
-(see [`hdjax.config.StreamedDataset`][]). The calibration streams through
+(see [`hdjax.pipelines.StreamedDataset`][]). The calibration streams through
 [`hdjax.compliance.calibrate_stream`][]; here the rest of [`hdjax.pipelines`][]' steps follow
 with memory bounded by the chunk:
 

@@ -4,10 +4,10 @@ streamed estimates, for the command line and the fleet.
 Not part of the documented API: these names may change with the packages that use them.
 """
 
+from ._model import build_model as build_model
 from ._paper import (
     PAPER_ERRORS as PAPER_ERRORS,
     PAPER_MS_PER_100 as PAPER_MS_PER_100,
-    build_model as build_model,
     calibrate as calibrate,
     calibrate_saved as calibrate_saved,
     current_scale as current_scale,
@@ -21,8 +21,10 @@ from ._paper import (
     time_per_100 as time_per_100,
     train_network as train_network,
 )
+from ._preflight import check_angles as check_angles
 from ._streamed import (
     ErrorSums as ErrorSums,
     StreamedEstimate as StreamedEstimate,
     model_estimates as model_estimates,
 )
+from ._streamed_dataset import PartStream as PartStream

@@ -1,7 +1,7 @@
 """An experiment's files as streams: `[fit] chunk > 0` with `[data] kind = "files"`.
 
 [`build_streamed_dataset`][] describes the same calibration and test parts as
-[`hdjax.config.build_dataset`][] (the last `split` of each training file as its test part, or
+[`hdjax.pipelines.build_dataset`][] (the last `split` of each training file as its test part, or
 every k-th block with `split_blocks`, the first `settle` seconds of each part left out), but as
 [`hdjax.compliance.RecordingStream`][]s that read the files chunk by chunk through the
 format readers ([`hdjax._formats.iter_recordings`][]), so no whole recording is ever in memory:
@@ -26,8 +26,9 @@ from .._formats import count_rows, iter_recordings
 from .._joint import Joint
 from ..compliance import RecordingStream
 from ..compliance.internal import recording_arrays, recording_from_arrays
-from ._load import column_map, resolve_path
-from ._saved_model import ratio_mismatch
+from ..config import column_map
+from ..config.internal import resolve_path
+from ..modelfile.internal import ratio_mismatch
 
 
 @dataclasses.dataclass
@@ -63,7 +64,7 @@ class PartStats:
         return float((self.n * sxy - sx * sy) / (self.n * sxx - sx * sx))
 
     def ratio_mismatch(self, ratio: float) -> str:
-        """As [`hdjax.config.ratio_mismatch`][] on the whole part."""
+        """As `ratio_mismatch` (the saved model's check) on the whole part."""
         if not (self.finite and self.theta_l_max - self.theta_l_min > 0.5):
             return ""
         # the same rule on a two-sample stand-in with the part's slope and spread

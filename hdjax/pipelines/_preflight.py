@@ -12,17 +12,10 @@ from pathlib import Path
 
 from .._custom_types import PathLike
 from .._errors import ConfigError, HdjaxError, ModelMismatchError
-from .._memory import (  # noqa: F401 - re-exported: the checks' historical home
-    BYTES_PER_SAMPLE,
-    CSV_FACTOR,
-    available_memory,
-    check_memory,
-    check_read_memory,
-    file_size,
-    size_text,
-)
-from ._saved_model import ratio_mismatch
-from ._schema import joint_of, model_of
+from .._memory import BYTES_PER_SAMPLE, CSV_FACTOR, check_memory, file_size
+from ..config.internal import joint_of
+from ..modelfile.internal import ratio_mismatch
+from ._model import build_model
 
 # The least-squares fit holds the design matrix about three times (the matrix, its QR factor
 # and the scaled copy).
@@ -33,7 +26,7 @@ _PLANT_DT = 5e-4
 def _n_coef(cfg: dict, where: str) -> int:
     """The number of model terms of a `[model]` table (the model is built to count them)."""
     try:
-        model = model_of(cfg, joint_of(cfg), 1.0)
+        model = build_model(cfg, joint_of(cfg), 1.0)
     except HdjaxError as err:
         raise ConfigError(f"{where} [model]: {' '.join(str(err).split())}") from None
     except (ValueError, TypeError) as err:

@@ -12,7 +12,7 @@
   Test recordings are named files, or the last `split` fraction of each training file (with
   `split_blocks = B`: every round(1/split)-th block of B samples, so both parts span the run).
 - `[fit] chunk > 0` with `kind = "files"`: the same parts as streams read chunk by chunk
-  ([`hdjax.config.StreamedDataset`][]), so memory is bounded by the chunk, not the logs.
+  ([`hdjax.pipelines.StreamedDataset`][]), so memory is bounded by the chunk, not the logs.
 - `kind = "synthetic"`: recordings generated from a known compliance (a five-segment
   flexspline, a cubic wave-generator term, a first-order kinematic error and white encoder
   noise) — a self-contained demo and test bed that needs no plant.
@@ -34,10 +34,10 @@ from .._io import ColumnMap, load_csv, load_npz
 from .._joint import Joint
 from .._recording import Recording, make_recording
 from ..compliance import paper_knots
+from ..config import Experiment, column_map
+from ..config.internal import joint_of, resolve_path
 from ..reference import describe_column_reference, load_with_reference
-from ._load import Experiment, column_map, resolve_path
-from ._schema import joint_of
-from ._streamed import StreamedDataset, build_streamed_dataset, streams
+from ._streamed_dataset import StreamedDataset, build_streamed_dataset, streams
 
 
 @dataclasses.dataclass
@@ -64,8 +64,8 @@ class Dataset:
 def build_dataset(
     exp: Experiment, progress: Callable[[str], None] | None = None
 ) -> Dataset | StreamedDataset:
-    """The [`hdjax.config.Dataset`][] an experiment describes (a
-    [`hdjax.config.StreamedDataset`][] when `[fit] chunk` streams the files).
+    """The [`hdjax.pipelines.Dataset`][] an experiment describes (a
+    [`hdjax.pipelines.StreamedDataset`][] when `[fit] chunk` streams the files).
 
     **Arguments:**
 
