@@ -13,12 +13,16 @@ import sys
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
-from hdjax import CalibrationError
+from hdjax import CalibrationError, Joint
+from hdjax.compliance import ComplianceModel
 from hdjax.discover import DiscoverOptions, _path, _second_start
 from hdjax.discover._pipeline import CrossValidation
-from hdjax.effects import PaperFourier
+from hdjax.discover._scores import _as_data, training_data
+from hdjax.effects import Coulomb, PaperFourier, Viscous
+from hdjax.pipelines import synthetic_recording
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
@@ -64,6 +68,7 @@ def test_no_second_path_without_a_motion_effect_in_the_model(monkeypatch):
         raise Calibrated
 
     monkeypatch.setattr(_second_start, "calibrate_baseline", calibrate)
+    monkeypatch.setattr(_second_start, "kinematic_share", lambda *a: 1.0)
     run = _path.LoopRun(*[None] * len(_path.LoopRun._fields))
     run = run._replace(options=DiscoverOptions(), phase=_path.Phases(), say=lambda _: None)
     cv = CrossValidation(1.0, 1.0, [], [])
@@ -82,6 +87,7 @@ def test_a_second_path_that_cannot_start_is_said(monkeypatch):
         raise CalibrationError("rank-deficient design")
 
     monkeypatch.setattr(_second_start, "calibrate_baseline", calibrate)
+    monkeypatch.setattr(_second_start, "kinematic_share", lambda *a: 1.0)
     run = _path.LoopRun(*[None] * len(_path.LoopRun._fields))
     run = run._replace(options=DiscoverOptions(), phase=_path.Phases(), say=lambda _: None)
     cv = CrossValidation(1.0, 1.0, [], [])
@@ -91,3 +97,58 @@ def test_a_second_path_that_cannot_start_is_said(monkeypatch):
     assert out.steps == found.steps and out.cv is cv and not out.start_structure
     assert out.notes[0] == "a note" and len(out.notes) == 2
     assert "not run: rank-deficient design" in out.notes[1]
+
+
+def test_no_second_path_where_the_kinematic_columns_miss_the_effect(monkeypatch):
+    # a motion effect whose columns the kinematic ones do not span (a friction on a to-and-fro
+    # motion): the columns cannot have taken part of it, and the second path is not followed
+    class Calibrated(Exception):
+        pass
+
+    def calibrate(*a, **k):
+        raise Calibrated
+
+    shares = []
+    monkeypatch.setattr(_second_start, "calibrate_baseline", calibrate)
+    monkeypatch.setattr(_second_start, "kinematic_share", lambda *a: shares[-1])
+    run = _path.LoopRun(*[None] * len(_path.LoopRun._fields))
+    run = run._replace(options=DiscoverOptions(), phase=_path.Phases(), say=lambda _: None)
+    cv = CrossValidation(1.0, 1.0, [], [])
+    found = _path.LoopPath(
+        [SimpleNamespace(key="coulomb:omega_l")], None, None, cv, {}, None, [], [], []
+    )
+    shares.append(0.5 * _second_start.KINEMATIC_SHARE)
+    assert _second_start.without_kinematic(run, None, found, cv) is found
+    shares.append(2.0 * _second_start.KINEMATIC_SHARE)
+    with pytest.raises(Calibrated):
+        _second_start.without_kinematic(run, None, found, cv)
+
+
+def _r2_of_best_direction(k: np.ndarray, e: np.ndarray) -> float:
+    # independent of the package: regress each centred column of e on the centred k, and take
+    # the largest R^2 over unit directions of e (the top generalised eigenvalue)
+    k = k - k.mean(0)
+    e = e - e.mean(0)
+    fitted = k @ np.linalg.lstsq(k, e, rcond=None)[0]
+    a, b = fitted.T @ fitted, e.T @ e
+    return float(np.max(np.real(np.linalg.eigvals(np.linalg.solve(b, a)))))
+
+
+@pytest.mark.parametrize("per_segment", [True, False])
+def test_kinematic_share_is_the_r2_of_the_effects_on_the_kinematic_columns(per_segment):
+    joint = Joint(ratio=160, rated_torque=400)
+    rec = synthetic_recording(joint, 3000, seed=3)
+    model = ComplianceModel.paper(joint, per_segment=per_segment, fourier_order=2)
+    model = model.with_effects(Coulomb(signal="omega_l", omega_s=0.05), Viscous(signal="omega_m"))
+    sig, torque = training_data(model, rec, np.asarray(rec.torque))
+    a = np.asarray(model.design(sig, torque))
+    names = model.term_names
+    kin = set(PaperFourier(order=2).names())
+    k_cols = [i for i, n in enumerate(names) if n.split("[seg")[0] in kin]
+    data = _as_data(model, rec)
+    for last, effect in (([True, False], -2), ([False, True], -1)):
+        share = _second_start.kinematic_share(model, data, np.asarray(rec.torque), last)
+        want = _r2_of_best_direction(a[:, k_cols], a[:, [effect]])
+        assert share == pytest.approx(want, abs=1e-8)
+    both = _second_start.kinematic_share(model, data, np.asarray(rec.torque), [True, True])
+    assert both == pytest.approx(_r2_of_best_direction(a[:, k_cols], a[:, -2:]), abs=1e-8)

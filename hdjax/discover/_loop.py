@@ -34,8 +34,9 @@
    rarely gets one, and a weak step after a confirmed one keeps its chance.
 7. **A second starting structure.** When the starting model holds the paper's kinematic
    columns (eq. (9), functions of angle times speed) and the path added an effect whose
-   columns depend on the speed or direction of motion, steps 3-6 run again from the structure
-   without those columns, on the same folds; that path is kept when its final cross-validated
+   columns depend on the speed or direction of motion and which those columns partly span on
+   TRAIN, steps 3-6 run again from the structure without them, on the same folds; that path is
+   kept when its final cross-validated
    torque error lies beyond one standard error below the first's
    ([`hdjax.discover._second_start.without_kinematic`][]).
 8. Refit on all of TRAIN, estimate torque on TEST and record the errors. TEST is never used

@@ -5,11 +5,16 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
+
 from .._errors import CalibrationError, InversionError
+from ..effects import PaperFourier
+from ._aliases import _model_rows, _strided
 from ._decision import qualifies
 from ._evaluate import test_errors
 from ._path import LoopPath, LoopRun, add_effects, say_step
 from ._pipeline import CrossValidation, cross_validate, estimate, within_one_se
+from ._scores import training_data
 from ._start import calibrate_baseline
 
 MOTION_FAMILIES = frozenset(
@@ -17,6 +22,11 @@ MOTION_FAMILIES = frozenset(
 )
 """Families whose columns depend on the speed or the direction of motion: on a slow sweep the
 paper's kinematic columns (functions of angle times speed) compete with them."""
+
+KINEMATIC_SHARE = 0.05
+"""The second path runs only where the paper's kinematic columns span at least this share
+(an $R^2$ on TRAIN) of some direction of the added motion effects' columns
+([`kinematic_share`][])."""
 
 KINEMATIC_FREE = (
     "the final model leaves out the starting model's kinematic columns (Song et al. eq. (9), "
@@ -27,6 +37,66 @@ KINEMATIC_FREE = (
     "speed-dependent effect (encoder skew, friction, hysteresis) explains physically; the "
     'model written holds the structure found ([model] kinematic = "none" for hdjax run)'
 )
+
+
+def _column_groups(model) -> tuple[list[int], list[list[int]]]:
+    """The design columns (eq. (15)) of `model`'s kinematic term (eq. (9), every segment's copy)
+    and of each effect term, in the order of `model.effect_terms`."""
+    n_seg, nb = model.n_segments, model.n_base
+    own, at = [], 0
+    for t in model.base_terms:
+        k = len(t.names())
+        own += list(range(at, at + k)) if isinstance(t, PaperFourier) else []
+        at += k
+    copies = n_seg if model.per_segment else 1
+    kinematic = [n_seg + s * nb + j for s in range(copies) for j in own]
+    effects, at = [], n_seg + copies * nb
+    for t in model.effect_terms:
+        effects.append(list(range(at, at + len(t.names()))))
+        at += len(t.names())
+    return kinematic, effects
+
+
+def kinematic_share(model, data, est_train, last: list[bool]) -> float:
+    """How much of the columns of `model`'s last effect terms flagged in `last` (one flag per
+    term, for the terms the loop's steps added, in order) the paper's kinematic columns (Song
+    et al. eq. (9)) span on TRAIN: the largest $R^2$ of a combination of those columns
+    regressed on the kinematic ones ([`first_canonical_r2`][]; on at most `MAX_ROWS` evenly
+    strided TRAIN rows, chunk by chunk with `data.chunk`).
+
+    Near 0 the two are orthogonal on TRAIN: the effects' coefficients are then the same with
+    the kinematic columns or without them (Frisch-Waugh-Lovell), so those columns cannot have
+    taken up part of the effects, which is what the second starting structure corrects.
+    """
+    kinematic, effects = _column_groups(model)
+    flagged = effects[len(effects) - len(last) :]
+    cols = [c for flag, group in zip(last, flagged) if flag for c in group]
+    if not kinematic or not cols:
+        return 0.0
+    sig, torque = training_data(model, data, est_train)
+    take = _strided(int(np.asarray(torque).shape[0]), data.rows)
+    rows = _model_rows(model, sig, torque, take, data.chunk)
+    return first_canonical_r2(rows[:, kinematic], rows[:, cols])
+
+
+def _span(a: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of the span of `a`'s centred columns (directions with a singular
+    value under 1e-10 of the largest dropped)."""
+    a = a - a.mean(axis=0, keepdims=True)
+    u, sv, _ = np.linalg.svd(a, full_matrices=False)
+    return u[:, sv > sv[0] * 1e-10] if sv.size and sv[0] > 0.0 else u[:, :0]
+
+
+def first_canonical_r2(a: np.ndarray, b: np.ndarray) -> float:
+    """The largest share of the variance of a combination of `b`'s columns that `a`'s columns
+    explain (with an intercept): the first squared canonical correlation between the two
+    (Hotelling 1936, *Biometrika* 28), the square of the largest singular value of $Q_a^\top
+    Q_b$ for orthonormal bases of the centred columns; 0 where either set is constant."""
+    qa, qb = _span(np.asarray(a, np.float64)), _span(np.asarray(b, np.float64))
+    if not qa.shape[1] or not qb.shape[1]:
+        return 0.0
+    top = np.linalg.svd(qa.T @ qb, compute_uv=False)[0]
+    return float(np.clip(top * top, 0.0, 1.0))
 
 
 def without_kinematic(run: LoopRun, train, found: LoopPath, base_cv: CrossValidation) -> LoopPath:
@@ -44,13 +114,21 @@ def without_kinematic(run: LoopRun, train, found: LoopPath, base_cv: CrossValida
     keeps the configured structure.
 
     The other path is followed only when the configured one added an effect of a family the
-    columns compete with (`MOTION_FAMILIES`): only then can they have taken up part of an
-    effect the model holds. A joint on which the configured path finds no such effect is not
-    given a second chance at one (on clean joints with white encoder noise, following it
-    whenever such a family was merely screened named effects the joints do not have).
+    columns compete with (`MOTION_FAMILIES`), and the columns span a share of that effect's
+    columns on TRAIN (at least `KINEMATIC_SHARE`, [`kinematic_share`][]): only then can they
+    have taken up part of an effect the model holds. A joint on which the configured path finds
+    no such effect is not given a second chance at one (on clean joints with white encoder
+    noise, following it whenever such a family was merely screened named effects the joints
+    do not have). On a to-and-fro motion a friction's columns and the kinematic ones are
+    nearly orthogonal, and the path, which takes as long as the first, is not run.
     """
     options = run.options
-    if not {s.key.split(":")[0] for s in found.steps} & MOTION_FAMILIES:
+    motion = [s.key.split(":")[0] in MOTION_FAMILIES for s in found.steps]
+    if not any(motion):
+        return found
+    with run.phase("aliases"):
+        share = kinematic_share(found.model, run.data, found.est_train, motion)
+    if share < KINEMATIC_SHARE:
         return found
     alt_options = dataclasses.replace(options, fourier_order=0)
     notes: list[str] = []
