@@ -18,7 +18,7 @@ import pytest
 
 from hdjax import CalibrationError, Joint
 from hdjax.compliance import ComplianceModel
-from hdjax.discover import DiscoverOptions, _path, _second_start
+from hdjax.discover import DiscoverOptions, _path, _second_start, _start
 from hdjax.discover._pipeline import CrossValidation
 from hdjax.discover._scores import _as_data, training_data
 from hdjax.effects import Coulomb, PaperFourier, Viscous
@@ -152,3 +152,31 @@ def test_kinematic_share_is_the_r2_of_the_effects_on_the_kinematic_columns(per_s
         assert share == pytest.approx(want, abs=1e-8)
     both = _second_start.kinematic_share(model, data, np.asarray(rec.torque), [True, True])
     assert both == pytest.approx(_r2_of_best_direction(a[:, k_cols], a[:, -2:]), abs=1e-8)
+
+
+@pytest.mark.slow
+def test_the_share_tells_a_slow_sweep_from_a_to_and_fro_motion():
+    # what the bound rests on: on a slow one-way sweep from rest (pauses, a gravity-like load;
+    # a draw of benchmarks/real_log_cases.py) the paper's kinematic columns span most of an
+    # encoder skew's column, so they can take part of it; on a to-and-fro motion over several
+    # cycles (100 s of the long-log benchmarks' joint) a Coulomb friction's column is nearly
+    # orthogonal to them, and the second path, which could not change the friction's reading,
+    # is not followed (over 40 s of the same motion the share is 0.08: the path runs)
+    import real_log_cases as cases
+
+    from tests.discover_data import JOINT as TF_JOINT, synthetic_recording as to_and_fro
+
+    def share(joint, rec, term):
+        # the loop's own starting structure (DiscoverOptions' defaults), with the effect added
+        table = _start.start_table(DiscoverOptions())
+        model = _start.paper_model(table, joint, 1.0).with_effects(term)
+        torque = np.asarray(rec.torque)
+        return _second_start.kinematic_share(model, _as_data(model, rec), torque, [True])
+
+    d = cases.draw("skew", 0, 0)
+    sweep, _ = cases._logs(d)
+    skew = cases.EncoderSkew(delay=d["skew_ms"] * 1e-3, ratio=cases.JOINT.ratio)
+    assert share(cases.JOINT, sweep, skew) > 0.5
+    rec = to_and_fro(1, [("coulomb_l", 8 / 206264.8, 0.05)], n=50_000)
+    friction = Coulomb(signal="omega_l", omega_s=0.05)
+    assert share(TF_JOINT, rec, friction) < 0.1 * _second_start.KINEMATIC_SHARE

@@ -119,8 +119,9 @@ def without_kinematic(run: LoopRun, train, found: LoopPath, base_cv: CrossValida
     have taken up part of an effect the model holds. A joint on which the configured path finds
     no such effect is not given a second chance at one (on clean joints with white encoder
     noise, following it whenever such a family was merely screened named effects the joints
-    do not have). On a to-and-fro motion a friction's columns and the kinematic ones are
-    nearly orthogonal, and the path, which takes as long as the first, is not run.
+    do not have). On a to-and-fro motion over many cycles a friction's columns and the
+    kinematic ones are nearly orthogonal, and the path, which takes as long as the first, is not
+    run; over a few cycles, or with per-segment coefficients, they can overlap, and it runs.
     """
     options = run.options
     motion = [s.key.split(":")[0] in MOTION_FAMILIES for s in found.steps]
