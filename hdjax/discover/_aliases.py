@@ -128,17 +128,41 @@ def unspanned_share(a: np.ndarray, cols: np.ndarray) -> float:
     a constant or non-finite column."""
     a = np.asarray(a, np.float64)
     cols = np.asarray(cols, np.float64)
-    a = a - a.mean(axis=0, keepdims=True)
-    keep = np.sqrt((a * a).sum(axis=0)) > 0.0
+    centred = a - a.mean(axis=0, keepdims=True)
+    keep = np.sqrt((centred * centred).sum(axis=0)) > 0.0
     c = cols - cols.mean(axis=0, keepdims=True)
     norms = np.sqrt((c * c).sum(axis=0))
     if not np.all(norms > 0.0) or not np.all(np.isfinite(c)):
         return 0.0
     c = c / norms
-    u, sv, _ = np.linalg.svd(a[:, keep], full_matrices=False)
-    u = u[:, sv > sv[0] * 1e-10] if sv.size else u[:, :0]
+    u = _orthonormal(centred[:, keep])
     r = c - u @ (u.T @ c)
     return float(np.clip(np.linalg.eigvalsh(r.T @ r).min(), 0.0, 1.0))
+
+
+def _orthonormal(a: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of the span of `a`'s columns (directions with a singular value
+    under 1e-10 of the largest dropped)."""
+    u, sv, _ = np.linalg.svd(a, full_matrices=False)
+    return u[:, sv > sv[0] * 1e-10] if sv.size and sv[0] > 0.0 else u[:, :0]
+
+
+def _centred(a) -> np.ndarray:
+    a = np.asarray(a, np.float64)
+    return a - a.mean(axis=0, keepdims=True)
+
+
+def first_canonical_r2(a: np.ndarray, b: np.ndarray) -> float:
+    """The largest share of the variance of a combination of `b`'s columns that `a`'s columns
+    explain (with an intercept): the first squared canonical correlation between the two
+    (Hotelling 1936, *Biometrika* 28), the square of the largest cosine of the principal angles
+    between the centred spans (where [`span_cosine`][] takes the smallest); 0 where either set
+    is constant."""
+    qa, qb = _orthonormal(_centred(a)), _orthonormal(_centred(b))
+    if not qa.shape[1] or not qb.shape[1]:
+        return 0.0
+    top = np.linalg.svd(qa.T @ qb, compute_uv=False)[0]
+    return float(np.clip(top * top, 0.0, 1.0))
 
 
 def alias_test(sig, torque, take=None, threshold: float = ALIAS_COSINE):

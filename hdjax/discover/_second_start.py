@@ -9,7 +9,7 @@ import numpy as np
 
 from .._errors import CalibrationError, InversionError
 from ..effects import PaperFourier
-from ._aliases import _model_rows, _strided
+from ._aliases import _model_rows, _strided, first_canonical_r2
 from ._decision import qualifies
 from ._evaluate import test_errors
 from ._path import LoopPath, LoopRun, add_effects, say_step
@@ -50,7 +50,7 @@ def _column_groups(model) -> tuple[list[int], list[list[int]]]:
         at += k
     copies = n_seg if model.per_segment else 1
     kinematic = [n_seg + s * nb + j for s in range(copies) for j in own]
-    effects, at = [], n_seg + copies * nb
+    effects, at = [], model.n_coef - model.n_effect
     for t in model.effect_terms:
         effects.append(list(range(at, at + len(t.names()))))
         at += len(t.names())
@@ -77,26 +77,6 @@ def kinematic_share(model, data, est_train, last: list[bool]) -> float:
     take = _strided(int(np.asarray(torque).shape[0]), data.rows)
     rows = _model_rows(model, sig, torque, take, data.chunk)
     return first_canonical_r2(rows[:, kinematic], rows[:, cols])
-
-
-def _span(a: np.ndarray) -> np.ndarray:
-    """An orthonormal basis of the span of `a`'s centred columns (directions with a singular
-    value under 1e-10 of the largest dropped)."""
-    a = a - a.mean(axis=0, keepdims=True)
-    u, sv, _ = np.linalg.svd(a, full_matrices=False)
-    return u[:, sv > sv[0] * 1e-10] if sv.size and sv[0] > 0.0 else u[:, :0]
-
-
-def first_canonical_r2(a: np.ndarray, b: np.ndarray) -> float:
-    """The largest share of the variance of a combination of `b`'s columns that `a`'s columns
-    explain (with an intercept): the first squared canonical correlation between the two
-    (Hotelling 1936, *Biometrika* 28), the square of the largest singular value of $Q_a^\top
-    Q_b$ for orthonormal bases of the centred columns; 0 where either set is constant."""
-    qa, qb = _span(np.asarray(a, np.float64)), _span(np.asarray(b, np.float64))
-    if not qa.shape[1] or not qb.shape[1]:
-        return 0.0
-    top = np.linalg.svd(qa.T @ qb, compute_uv=False)[0]
-    return float(np.clip(top * top, 0.0, 1.0))
 
 
 def without_kinematic(run: LoopRun, train, found: LoopPath, base_cv: CrossValidation) -> LoopPath:
