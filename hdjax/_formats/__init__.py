@@ -43,8 +43,6 @@ SUFFIXES = {
 }
 """File suffix -> reader module."""
 
-EXTRAS = {"_parquet": ("pyarrow", "parquet"), "_hdf5": ("h5py", "hdf5"), "_mcap": ("mcap", "mcap")}
-
 
 def reader(path):
     """The reader module for `path`, chosen by its suffix."""

@@ -145,7 +145,7 @@ def default_columns(path, used: list[str]) -> list[str]:
 def iter_tables(path, chunk: int, names=None):
     """Tables of at most `chunk` messages per topic, topics kept in step."""
     path = Path(path)
-    names_all, where = _catalogue(path)
+    _, where = _catalogue(path)
     names = default_columns(path, []) if names is None else names
     topics = sorted({where[n][0] for n in names})
     buf = {t: [] for t in topics}

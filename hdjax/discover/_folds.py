@@ -59,11 +59,6 @@ def memory_starts(t) -> np.ndarray:
     return start
 
 
-def segment_ids(t) -> np.ndarray:
-    """The index of the contiguous segment each sample belongs to."""
-    return np.cumsum(segment_starts(t)) - 1
-
-
 def correlation_length(residual, starts=None, *, max_lag: int = 2000) -> int:
     """Lag [samples] at which the residual's autocorrelation first falls below $1/e$.
 

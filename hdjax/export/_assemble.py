@@ -13,8 +13,6 @@ import dataclasses
 from .. import __version__
 from ._emitter import Emitter, c_double
 
-VELOCITIES = ("difference", "smoothed")
-
 FLAGS = (
     ("HDJAX_OUT_OF_RANGE", 1, "the torque lies outside the calibrated range"),
     ("HDJAX_AMBIGUOUS", 2, "several torque segments were self-consistent (the deepest is taken)"),

@@ -14,9 +14,6 @@ import numpy as np
 from .._custom_types import ArrayLike, Real
 from .._plotting import png_bytes, pyplot
 
-_METHOD_LABEL = {"model": "model-based (eqs. 7-10, 26-27)", "network": "BP network (eqs. 36-46)"}
-
-
 _plt = pyplot
 
 
