@@ -45,7 +45,13 @@ import numpy as np
 from .._custom_types import Array, ArrayLike, Float, SamplesLike, Scalar
 from .._errors import ConfigError
 from .._features import Signals
-from ._base import AbstractFamily, AbstractTorqueFreeTerm, Candidate, CandidateContext
+from ._base import (
+    SEGMENT_START,
+    AbstractFamily,
+    AbstractTorqueFreeTerm,
+    Candidate,
+    CandidateContext,
+)
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import fmt, hyper, rounded
 from ._traced import opaque_in
@@ -67,13 +73,19 @@ REFINE_RTOL = 1e-3
 """A fitted delay within this fraction of the term's own is taken as converged."""
 
 
-def delayed(t, x, delay: Scalar, xp: ModuleType = np):
+def delayed(t, x, delay: Scalar, xp: ModuleType = np, restart=None):
     """`x` at the instants `t - delay` (`delay >= 0`), by linear interpolation between the
     recorded samples at or before each instant (up to `BACK_SAMPLES` back, the oldest of them
     beyond); an instant before the record starts keeps the sample's own value. Samples across
-    a time reversal (joined recordings) are never read."""
+    a time reversal (joined recordings) are never read, nor across a sample where `restart`
+    (1 at the first sample of a segment, the signal `SEGMENT_START`) is set: an instant
+    before its segment starts is one before the record starts. Across shorter gaps (dropped
+    samples, where memory states carry on too) the angle is interpolated; across a long
+    one, where the joint may have done anything (the join of two recordings, the blocks of
+    a split log), interpolation would read a speed the joint never had."""
     t, x = xp.asarray(t), xp.asarray(x)
     n = t.shape[0]
+    restart = xp.zeros(n, bool) if restart is None else xp.asarray(restart) != 0
 
     def shift(a, m):  # a[k - m] at k, the first value repeated before the start
         m = min(m, n)
@@ -81,16 +93,16 @@ def delayed(t, x, delay: Scalar, xp: ModuleType = np):
 
     target = t - delay
     out, done = x, xp.zeros(n, bool)
-    hi_t, hi_x = t, x
+    hi_t, hi_x, hi_r = t, x, restart
     for m in range(1, BACK_SAMPLES + 1):
         # the pair (k - m, k - m + 1) around the target, inside one increasing run of t
         lo_t, lo_x = shift(t, m), shift(x, m)
-        edge = lo_t >= hi_t  # the record's start, or a time reversal
+        edge = (lo_t >= hi_t) | hi_r  # the record's or a segment's start, a time reversal
         inside = ~done & ~edge & (lo_t <= target)
         frac = (target - lo_t) / xp.where(edge, 1.0, hi_t - lo_t)
         out = xp.where(inside, lo_x + frac * (hi_x - lo_x), out)
         done = done | inside | edge
-        hi_t, hi_x = lo_t, lo_x
+        hi_t, hi_x, hi_r = lo_t, lo_x, shift(restart, m)
     return xp.where(done, out, hi_x)
 
 
@@ -131,7 +143,7 @@ class EncoderSkew(AbstractTorqueFreeTerm):
         d = xp.abs(delay)
         t = xp.asarray(sig.t)
         x = xp.where(delay > 0, xp.asarray(sig.theta_l), xp.asarray(sig.theta_m) / ratio)
-        return sign * (x - delayed(t, x, d, xp)) / d
+        return sign * (x - delayed(t, x, d, xp, sig.extras.get(SEGMENT_START))) / d
 
     def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
         return self._column(sig, jnp)[:, None]
