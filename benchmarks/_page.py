@@ -291,6 +291,34 @@ TARGETS: dict[str, list[tuple[str, str, str, str]]] = {
             "{summary/hysteresis/not_worse}",
             "every draw",
         ),
+        (
+            "two_speeds/summary/skew/delay_met",
+            "TRAIN at two speeds (0.25 and 0.4 rad/s): encoder skew found as its delay within 10 %",
+            "{two_speeds/summary/skew/delay_ok}",
+            "every draw",
+        ),
+        (
+            "two_speeds/summary/skew/test_met",
+            "TRAIN at two speeds: encoder skew, TEST error at most 1.5× the true structure "
+            "refitted",
+            "{two_speeds/summary/skew/test_ok}; worst "
+            "{two_speeds/summary/skew/test_over_true_max}×",
+            "every draw",
+        ),
+        (
+            "two_speeds/summary/hysteresis/test_met",
+            "TRAIN at two speeds: hysteresis from rest, TEST error at most 1.5× the true "
+            "structure refitted",
+            "{two_speeds/summary/hysteresis/test_ok}; worst "
+            "{two_speeds/summary/hysteresis/test_over_true_max}×",
+            "every draw",
+        ),
+        (
+            "two_speeds/summary/hysteresis/not_worse_met",
+            "TRAIN at two speeds: hysteresis from rest, TEST error not above the starting model's",
+            "{two_speeds/summary/hysteresis/not_worse}",
+            "every draw",
+        ),
     ],
     "compare_methods.py": [
         (
@@ -570,6 +598,17 @@ def _scale(snapshot: dict) -> list[str]:
 # One section a script
 
 
+def _row_lists(result: dict, prefix: str = ""):
+    """(key path, list) of every list of rows (dicts) in a script's JSON, at its top level or
+    one table down (`two_speeds/draws`)."""
+    for key, value in result.items():
+        path = f"{prefix}{key}"
+        if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            yield path, value
+        elif isinstance(value, dict) and not prefix:
+            yield from _row_lists(value, f"{path}/")
+
+
 def _section(entry: dict) -> str:
     command = " ".join(["python", entry["script"], *entry["args"]])
     when = ""
@@ -582,10 +621,9 @@ def _section(entry: dict) -> str:
         )
         return "\n".join(out)
     result = entry["result"]
-    for key, value in result.items():
-        if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
-            if len(value) <= 40:
-                out.append(f"`{key}`:\n\n{_rows_table(value)}\n")
+    for key, value in _row_lists(result):
+        if len(value) <= 40:
+            out.append(f"`{key}`:\n\n{_rows_table(value)}\n")
     raw = _TEMP.sub("(a temporary folder)", json.dumps(result, indent=1))
     out.append(
         f'<details markdown="1"><summary>The JSON it printed</summary>\n\n```json\n{raw}\n```\n\n'
