@@ -189,6 +189,10 @@ def _run_setting(kinds, draws, seed, speeds, fourier_order) -> list[dict]:
         for i in range(draws):
             row = run_draw(draw(kind, i, seed), speeds, fourier_order)
             rows.append(row)
+            # each draw's logs have their own lengths, so their programs are compiled anew:
+            # dropping the last draw's keeps a long run's compiled code (and the process's
+            # memory mappings) bounded
+            jax.clear_caches()
             print(
                 f"[real_log_cases] TRAIN at {','.join(map(str, speeds))} rad/s, {kind} "
                 f"{i + 1}/{draws}: {row['effects']} {row['start_rms']:.3g} -> "
