@@ -19,11 +19,13 @@ coefficient *is* the delay [s]:
 $c_\delta(t) = s\,(x(t) - x(t - |\delta|))/|\delta|$, with $x = \theta_l$ for $\delta > 0$ and
 $x = \theta_m/N$ for $\delta < 0$ (the encoder read earlier is interpolated back to the later
 one's instant, so only recorded samples at or before $t$ are read: causal), linear
-interpolation on the recording's own timestamps (jitter and dropped samples included). The
-twist then holds $\delta\,c_\delta$ exactly; a fit's coefficient $\hat\delta$ differs from the
-term's $\delta$ only through the column's curvature terms, and the loop refits at
-$\delta = \hat\delta$ until the two agree ([`EncoderSkew.refined`][]). When $|\delta|$ is below
-the sample period the column is the backward-difference speed, for any $\delta$.
+interpolation on the recording's own timestamps (jitter and dropped samples included, never
+across a long gap: where `SEGMENT_START` marks a new segment, the column starts again as at
+the record's start, see `delayed`). The twist then holds $\delta\,c_\delta$ exactly; a fit's
+coefficient $\hat\delta$ differs from the term's $\delta$ only through the column's
+curvature terms, and the loop refits at $\delta = \hat\delta$ until the two agree
+([`EncoderSkew.refined`][]). When $|\delta|$ is below the sample period the column is the
+backward-difference speed, for any $\delta$.
 
 **Skew or friction.** Output-side friction between the flexspline and the reference sensor adds
 $F_v\omega_l$ to the twist-derived torque; the motor current carries that friction and the
