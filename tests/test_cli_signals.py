@@ -56,7 +56,14 @@ def _loading_jax(proc) -> bool:
 
 def _finish(proc, sig):
     proc.send_signal(sig)
-    out, err = proc.communicate(timeout=120)
+    try:
+        out, err = proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        # the signal was lost: the test fails, and the command must not run on after it (a
+        # million timing repeats at full load) nor leave its pipes for a later test's collector
+        proc.kill()
+        proc.communicate()
+        raise
     return proc.returncode, err
 
 
