@@ -75,11 +75,11 @@ REFINE_RTOL = 1e-3
 """A fitted delay within this fraction of the term's own is taken as converged."""
 
 
-def delayed(t, x, delay: Scalar, xp: ModuleType = np, restart=None):
+def delayed(t, x, delay: Scalar, xp: ModuleType = np, reset=None):
     """`x` at the instants `t - delay` (`delay >= 0`), by linear interpolation between the
     recorded samples at or before each instant (up to `BACK_SAMPLES` back, the oldest of them
     beyond); an instant before the record starts keeps the sample's own value. Samples across
-    a time reversal (joined recordings) are never read, nor across a sample where `restart`
+    a time reversal (joined recordings) are never read, nor across a sample where `reset`
     (1 at the first sample of a segment, the signal `SEGMENT_START`) is set: an instant
     before its segment starts is one before the record starts. Across shorter gaps (dropped
     samples, where memory states carry on too) the angle is interpolated; across a long
@@ -87,7 +87,7 @@ def delayed(t, x, delay: Scalar, xp: ModuleType = np, restart=None):
     a split log), interpolation would read a speed the joint never had."""
     t, x = xp.asarray(t), xp.asarray(x)
     n = t.shape[0]
-    restart = xp.zeros(n, bool) if restart is None else xp.asarray(restart) != 0
+    reset = xp.zeros(n, bool) if reset is None else xp.asarray(reset) != 0
 
     def shift(a, m):  # a[k - m] at k, the first value repeated before the start
         m = min(m, n)
@@ -95,7 +95,7 @@ def delayed(t, x, delay: Scalar, xp: ModuleType = np, restart=None):
 
     target = t - delay
     out, done = x, xp.zeros(n, bool)
-    hi_t, hi_x, hi_r = t, x, restart
+    hi_t, hi_x, hi_r = t, x, reset
     for m in range(1, BACK_SAMPLES + 1):
         # the pair (k - m, k - m + 1) around the target, inside one increasing run of t
         lo_t, lo_x = shift(t, m), shift(x, m)
@@ -104,7 +104,7 @@ def delayed(t, x, delay: Scalar, xp: ModuleType = np, restart=None):
         frac = (target - lo_t) / xp.where(edge, 1.0, hi_t - lo_t)
         out = xp.where(inside, lo_x + frac * (hi_x - lo_x), out)
         done = done | inside | edge
-        hi_t, hi_x, hi_r = lo_t, lo_x, shift(restart, m)
+        hi_t, hi_x, hi_r = lo_t, lo_x, shift(reset, m)
     return xp.where(done, out, hi_x)
 
 
