@@ -28,6 +28,7 @@ from types import ModuleType
 from typing import ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -57,6 +58,21 @@ computed as the estimator will compute it, causally and without the reference se
 SEGMENT_START = "_segment_start"
 """Name of an optional signal, 1 at the first sample of each contiguous segment of a recording
 with gaps: memory states (hysteresis) restart there (see [`hdjax.effects.dahl_state`][])."""
+
+
+def late(x, reset=None, at_reset: float | None = 0.0):
+    """`x` one sample late: `x[k-1]` at sample `k`; at the record's first sample and at each
+    `reset`, `at_reset` (the state a restart begins with), or with `None` the sample's own
+    value. JAX or NumPy arrays alike."""
+    xp = jnp if isinstance(x, jax.Array) else np
+    prev = xp.concatenate([x[:1], x[:-1]])
+    first = xp.zeros(x.shape, bool)
+    first = first.at[0].set(True) if xp is jnp else np.r_[True, np.zeros(x.shape[0] - 1, bool)]
+    if reset is not None:
+        first = first | (xp.asarray(reset) != 0)
+    fill = x if at_reset is None else xp.full(x.shape, at_reset, x.dtype)
+    return xp.where(first, fill, prev)
+
 
 PLANT_SLOTS = (
     "kinematic_m",

@@ -15,12 +15,18 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Array, Float, SamplesLike
 from .._features import Signals
-from ._base import AbstractFamily, AbstractTorqueFreeTerm, Candidate, CandidateContext
+from ._base import (
+    SEGMENT_START,
+    AbstractFamily,
+    AbstractTorqueFreeTerm,
+    Candidate,
+    CandidateContext,
+    late,
+)
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import hyper, labels, rounded
 from ._traced import opaque_hypers
@@ -35,7 +41,9 @@ class TwistRate(AbstractTorqueFreeTerm):
     difference of samples $k-1$ and $k-2$): the rate at $k$ differences the present sample,
     whose encoder noise is then both in the column and in the twist it explains, and a
     regression on it fits that noise (a "damping" on a joint that has none). One sample of
-    delay is far below a damped mode's period at the sampling rates it can be seen at."""
+    delay is far below a damped mode's period at the sampling rates it can be seen at. Where a
+    segment starts (`SEGMENT_START`: the record's start, a join, a long gap) the column is the
+    sample's own rate, as the velocities never reach across a gap."""
 
     ratio: float = hyper(1.0, positive=True)
     sign: float = hyper(1.0)
@@ -45,12 +53,15 @@ class TwistRate(AbstractTorqueFreeTerm):
 
     def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
         # constants round as traced values do (`opaque_hypers`)
-        return opaque_hypers(self)._column(sig.omega_m, sig.omega_l)[:, None]
+        reset = sig.extras.get(SEGMENT_START)
+        return opaque_hypers(self)._column(sig.omega_m, sig.omega_l, reset)[:, None]
 
     def numpy_columns(
         self, sig: Signals, torque: SamplesLike | None = None
     ) -> Float[np.ndarray, "n 1"]:
-        return self._column(np.asarray(sig.omega_m), np.asarray(sig.omega_l))[:, None]
+        reset = sig.extras.get(SEGMENT_START)
+        reset = None if reset is None else np.asarray(reset)
+        return self._column(np.asarray(sig.omega_m), np.asarray(sig.omega_l), reset)[:, None]
 
     def c_code(self, c: AbstractCEmitter) -> CSnippet:
         """The scaled twist rate for the exported estimator, one sample late (the previous
@@ -65,11 +76,10 @@ class TwistRate(AbstractTorqueFreeTerm):
         )
         return CSnippet(columns=(out,), state=(("prev", 0.0), ("out", 0.0)), update=update)
 
-    def _column(self, omega_m, omega_l):
+    def _column(self, omega_m, omega_l, reset):
         # the same arithmetic for JAX and NumPy arrays; one sample late (class docstring)
         rate = self.sign * (omega_l - omega_m / self.ratio) / self.scale
-        xp = np if isinstance(rate, np.ndarray) else jnp
-        return xp.concatenate([rate[:1], rate[:-1]])
+        return late(rate, reset, None)
 
 
 class DampingFamily(AbstractFamily):

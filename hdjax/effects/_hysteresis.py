@@ -47,6 +47,7 @@ from ._base import (
     Candidate,
     CandidateContext,
     PlantEffect,
+    late,
 )
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, concrete, fmt, hyper, labels
@@ -231,20 +232,6 @@ def _dahl_column_numpy(
         z = z + zeta * dahl_initial(driver, term.torque_scale, reset)
     lag = getattr(term, "lag", False)
     return (np.asarray(late(z, reset, None)) if lag else z)[:, None]
-
-
-def late(x, reset=None, at_reset: float | None = 0.0):
-    """`x` one sample late: `x[k-1]` at sample `k`; at the record's first sample and at each
-    `reset`, `at_reset` (the state a restart begins with), or with `None` the sample's own
-    value. JAX or NumPy arrays alike."""
-    xp = jnp if isinstance(x, jax.Array) else np
-    prev = xp.concatenate([x[:1], x[:-1]])
-    first = xp.zeros(x.shape, bool)
-    first = first.at[0].set(True) if xp is jnp else np.r_[True, np.zeros(x.shape[0] - 1, bool)]
-    if reset is not None:
-        first = first | (xp.asarray(reset) != 0)
-    fill = x if at_reset is None else xp.full(x.shape, at_reset, x.dtype)
-    return xp.where(first, fill, prev)
 
 
 class Hysteresis(AbstractPathTerm):

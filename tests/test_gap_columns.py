@@ -1,4 +1,5 @@
-"""The encoder-skew column never reads across a long gap.
+"""The columns that look back in time (the encoder skew's interpolation, the twist rate one
+sample late) never read across a long gap.
 
 A record with a long gap (two recordings joined, the blocks of a split log) holds segments in
 which the joint may have moved anywhere between them. The skew's column interpolates the
@@ -17,7 +18,7 @@ import pytest
 
 import hdjax
 from hdjax.discover import pipeline_signals
-from hdjax.effects import EncoderSkew
+from hdjax.effects import EncoderSkew, TwistRate
 
 RATIO = 160.0
 
@@ -55,6 +56,20 @@ def test_the_skew_column_of_a_joined_record_is_each_segments_own(delay):
     # (the motor angle over the ratio for a negative delay, both within the twist's rate)
     np.testing.assert_allclose(own[1][0][10:], own[1][1][10:], atol=1e-9)
     assert np.abs(own[1][0][10:] - 0.3).max() < 0.2
+
+
+def test_the_twist_rate_of_a_joined_record_is_each_segments_own():
+    # one sample late, the damping column read the first segment's last rate at the second
+    # segment's first sample (measured: off by 0.38 of the column's scale at the join here)
+    a, b = _segment(0.0, -1.2), _segment(1.4, 1.2, seed=1)
+    term = TwistRate(ratio=RATIO, sign=1.0, scale=1e-4)
+    joined = _columns(term, _recording(a, b))
+    own = [_columns(term, _recording(s)) for s in (a, b)]
+    n = a[0].size
+    for got in joined:
+        np.testing.assert_allclose(got[:n], own[0][0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(got[n:], own[1][0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(own[1][0], own[1][1], rtol=0, atol=1e-9)
 
 
 def test_a_dropped_sample_is_interpolated_across():
