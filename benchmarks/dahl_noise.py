@@ -12,10 +12,14 @@ Each draw of `real_log_cases.py`'s hysteresis kind simulates its TRAIN log with 
 noise-free signals (`with_truth`), and compares with the joint's own state (the same law
 driven by the noise-free twist, from the same initial state, loaded the other way):
 
-- the state driven by the measured twist, as the residual loop computes it today;
-- the same after a play operator (dead band) of half-width $m\\,\\sigma$ on the driver, $\\sigma$
-  the driver's noise per sample estimated where the joint rests (a robust MAD of its steps),
-  for $m$ in `--widths`;
+- the state driven by the raw measured twist (no play);
+- the same after a play operator (dead band, `hdjax.effects.play`) of half-width $m\\,\\sigma$ on
+  the driver, for $m$ in `--widths`: $\\sigma$ the driver's noise per sample as the residual
+  loop measures it (`hdjax.effects.driver_noise`, from the second differences; the loop uses
+  $m = 3$), checked against the noise measured where the joint rests (a robust MAD of its
+  steps, with the plant's truth telling rest from motion), and the ratio of the largest to the
+  smallest of its deviations from the second, third and fourth differences
+  (`hdjax.effects.noise_deviations`; white noise is read below `WHITE_SPREAD`);
 - the carry of the initial state at the motion's start ($P$ of `hdjax.effects.dahl_initial`).
 
 Precision: float64 (x64 on). Prints JSON; writes `benchmarks/out/dahl_noise.json`.
@@ -41,17 +45,13 @@ import numpy as np  # noqa: E402
 import real_log_cases as cases  # noqa: E402
 
 from hdjax import plant, twist  # noqa: E402
-from hdjax.effects import dahl_initial, dahl_state_numpy  # noqa: E402
-
-
-def play(u: np.ndarray, half_width: float) -> np.ndarray:
-    """The play (backlash) operator: the output moves only when the input leaves the band of
-    `half_width` around it."""
-    out, y = np.empty_like(u), float(u[0])
-    for k, x in enumerate(u):
-        y = min(max(y, x - half_width), x + half_width)
-        out[k] = y
-    return out
+from hdjax.effects import (  # noqa: E402
+    dahl_initial,
+    dahl_state_numpy,
+    driver_noise,
+    noise_deviations,
+    play,
+)
 
 
 def state(driver: np.ndarray, width: float) -> np.ndarray:
@@ -74,7 +74,9 @@ def one_draw(d: dict, widths: list[float]) -> dict:
     speed = np.gradient(np.asarray(truth["true_theta_l"]), np.asarray(rec.t))
     rest = np.abs(speed) < 1e-3
     steps = np.diff(measured)[rest[1:]]
-    sigma = float(1.4826 * np.median(np.abs(steps - np.median(steps))) / np.sqrt(2))
+    at_rest = float(1.4826 * np.median(np.abs(steps - np.median(steps))) / np.sqrt(2))
+    sigma = driver_noise(measured)
+    devs = noise_deviations(measured)
     motion = int(np.flatnonzero(~rest)[0])
     z_true, z_meas = state(true, width), state(measured, width)
     rms = lambda z: float(np.sqrt(np.mean((z - z_true) ** 2)))  # noqa: E731
@@ -86,6 +88,8 @@ def one_draw(d: dict, widths: list[float]) -> dict:
         "seed": d["seed"],
         "width_nm": width,
         "driver_noise_nm": sigma,
+        "driver_noise_at_rest_nm": at_rest,
+        "white_spread": max(devs) / min(devs),
         "motion_start_sample": motion,
         "initial_carry_at_motion": float(carry[motion]),
         "state_error_rms_measured": rms(z_meas),
@@ -115,6 +119,8 @@ def main():
         "draws": rows,
         "median": {
             "driver_noise_nm": med("driver_noise_nm"),
+            "driver_noise_at_rest_nm": med("driver_noise_at_rest_nm"),
+            "white_spread_max": max(r["white_spread"] for r in rows),
             "initial_carry_at_motion": med("initial_carry_at_motion"),
             "state_error_rms_measured": med("state_error_rms_measured"),
             "state_error_rms_play": {

@@ -5,7 +5,9 @@ Each draw simulates one joint (`hdjax.plant.simulate_real_log`: slow one-way swe
 under gravity with pauses, jittered timestamps with dropped samples, white encoder noise,
 2^24-count encoders with the joint's offsets), a TRAIN log and a TEST log of another sweep at
 another speed, and runs `discover` on them as a user would. The true structure (the starting
-model plus the true effects' terms) is refitted by the same pipeline for reference.
+model plus the true effects' terms; a hysteresis behind the play that the loop reads from
+TRAIN's encoder noise, `hdjax.effects.twist_play`) is refitted by the same pipeline for
+reference.
 
 Two kinds of draw, `--draws` of each (seeds and parameters drawn from `--seed`):
 
@@ -56,8 +58,13 @@ import numpy as np  # noqa: E402
 
 import hdjax  # noqa: E402
 from hdjax import plant  # noqa: E402
-from hdjax.discover import DiscoverOptions, discover, refit_structure  # noqa: E402
-from hdjax.effects import EncoderSkew, Harmonics, TwistHysteresis  # noqa: E402
+from hdjax.discover import (  # noqa: E402
+    DiscoverOptions,
+    discover,
+    pipeline_signals,
+    refit_structure,
+)
+from hdjax.effects import EncoderSkew, Harmonics, TwistHysteresis, twist_play  # noqa: E402
 
 ARCMIN = math.pi / (180 * 60)
 JOINT = hdjax.Joint(ratio=160, rated_torque=400)
@@ -133,8 +140,13 @@ def _true_terms(d: dict, train) -> list:
     if d["skew_ms"]:
         terms.append(EncoderSkew(delay=float(d["skew_ms"]) * 1e-3, ratio=160.0))
     if d["with"] == "hysteresis":
+        # behind the play the residual loop gives the state on TRAIN (its encoder noise)
+        sig = pipeline_signals(train, float(JOINT.ratio), 1.0, "difference").sig
+        h = twist_play(sig, K1)
         terms.append(
-            TwistHysteresis(torque_scale=d["hyst_fraction"] * RATED, compliance=K1, initial=-1.0)
+            TwistHysteresis(
+                torque_scale=d["hyst_fraction"] * RATED, compliance=K1, initial=-1.0, play=h
+            )
         )
     if d["with"] == "harmonic":
         terms.append(Harmonics("theta_m", (2.0,)))

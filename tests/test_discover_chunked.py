@@ -79,6 +79,7 @@ def test_dahl_state_chunkwise_equals_whole_record(base, chunk, numpy):
     for term in (
         Hysteresis(torque_scale=0.05 * RATED),
         TwistHysteresis(torque_scale=0.02 * RATED, compliance=1.5e-5),
+        TwistHysteresis(torque_scale=0.02 * RATED, compliance=1.5e-5, play=0.01 * RATED),
     ):
         whole = np.asarray(term.numpy_columns(sig) if numpy else term.columns(sig))[:, 0]
         chunked = dahl_chunked(term, sig, None, chunk, numpy=numpy)

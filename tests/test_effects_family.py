@@ -186,6 +186,7 @@ def _all_terms(rated):
         effects.Hysteresis(0.05 * rated),
         effects.TwistHysteresis(0.05 * rated, 1.5e-5),
         effects.TwistHysteresis(0.05 * rated, 1.5e-5, initial=-1.0),
+        effects.TwistHysteresis(0.05 * rated, 1.5e-5, initial=-1.0, play=0.02 * rated),
         effects.EncoderSkew(delay=1.5e-3, ratio=160.0, sign=-1.0),
         effects.EncoderSkew(delay=-0.4e-3, ratio=160.0),
         effects.Backlash(0.02 * rated),

@@ -54,6 +54,7 @@ def every_effect_model() -> ComplianceModel:
         fx.Viscous("omega_l", 1.0),
         fx.Stribeck("omega_m", 0.5, 1.5),
         fx.TwistHysteresis(2.0, 3e-5),
+        fx.TwistHysteresis(5.0, 3e-5, play=0.5),
         fx.Hysteresis(3.0),
         fx.Backlash(2.0),
         fx.Stiffening(90.0),

@@ -34,10 +34,11 @@ def model_of(velocity="difference", hysteresis=False, recs=None):
     """The paper's model; `hysteresis` True: a Dahl state of the torque path; "twist": of the
     measured twist (the residual loop's `hysteresis:torque`), its compliance from `recs`."""
     m = ComplianceModel.paper(JOINT, current_scale=1.0, velocity=velocity)
-    if hysteresis == "twist":
+    if hysteresis in ("twist", "twist-play"):
         sig, torque = stacked_signals(m, recs)
         k = twist_compliance(sig, torque, JOINT.rated_torque)
-        return m.with_effects(TwistHysteresis(torque_scale=10.0, compliance=k))
+        h = 2.0 if hysteresis == "twist-play" else 0.0  # a play of 2 N·m on the driver
+        return m.with_effects(TwistHysteresis(torque_scale=10.0, compliance=k, play=h))
     return m.with_effects(Hysteresis(torque_scale=10.0)) if hysteresis else m
 
 
@@ -60,6 +61,8 @@ def assert_same_fit(a, b, rtol=1e-9):
         ("smoothed", True),
         ("difference", "twist"),
         ("smoothed", "twist"),
+        ("difference", "twist-play"),
+        ("smoothed", "twist-play"),
     ],
 )
 def test_stream_equals_in_memory(recs, velocity, hysteresis):

@@ -34,6 +34,15 @@ def _dahl(du, z0):
     return jax.lax.scan(_step, z0, du)
 
 
+def _held_play(driver, h, w, y0):
+    # hdjax.effects.play from the carried value y0, advancing only where w > 0
+    def _step(y, x):
+        v, own = x
+        return (y := jnp.where(own, jnp.clip(y, v - h, v + h), y)), y
+
+    return jax.lax.scan(_step, y0, (driver, w > 0))[1]
+
+
 @eqx.filter_jit
 def fused_columns(model, win, w, z0s):
     """One window's compact columns (separate 1-D arrays: XLA on CPU stacks columns slowly,
@@ -53,6 +62,10 @@ def fused_columns(model, win, w, z0s):
             # as at the very start); halo and padding rows (w = 0) leave the state unchanged
             z0, prev = z0s[k, 0], z0s[k, 1]
             prev = jnp.where(jnp.isnan(prev), driver[0], prev)
+            if getattr(term, "play", 0.0):
+                # the driver after its play (TwistHysteresis), the play's output carried as
+                # the driver value; rows outside the window's own (w = 0) hold it
+                driver = _held_play(driver, term.play, w, prev)
             du = jnp.diff(driver, prepend=prev[None]) * w / term.torque_scale
             z_end, z = _dahl(du, z0)
             z_ends.append(jnp.stack([z_end, driver[last_row]]))

@@ -89,6 +89,7 @@ def _library_options_class():
         "- `smoothing_fractions`: $\\omega_s$ grid as fractions of the velocity's RMS.\n"
         "- `dahl_fractions`, `backlash_fractions`: Dahl scale and backlash width as fractions of\n"
         "  $\\tau_0$.\n"
+        "- `dahl_play`: the play on a Dahl state's driver, in deviations of its noise (0: none).\n"
         "- `families`: the families to offer (default all registered ones).\n"
     )
     cls = dataclasses.make_dataclass("LibraryOptions", fields, frozen=True)

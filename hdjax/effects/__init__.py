@@ -58,9 +58,13 @@ from ._hysteresis import (
     dahl_initial as dahl_initial,
     dahl_state as dahl_state,
     dahl_state_numpy as dahl_state_numpy,
+    driver_noise as driver_noise,
+    noise_deviations as noise_deviations,
     one_way_from_rest as one_way_from_rest,
+    play as play,
     starts_at_rest as starts_at_rest,
     twist_compliance as twist_compliance,
+    twist_play as twist_play,
 )
 from ._kinematic import (
     Harmonics as Harmonics,

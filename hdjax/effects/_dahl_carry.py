@@ -3,7 +3,8 @@ r"""The Dahl state of a hysteresis term carried from one chunk of a record into 
 A Dahl state ([`hdjax.effects.dahl_state`][]) has unbounded memory, so a record read in
 chunks (a streamed calibration, a streamed estimate, the residual loop's chunked fits) gets the
 state of one pass over the whole record only if each chunk starts from the state, and the
-driver value, that the previous chunk ended with. [`DahlCarry`][] does that for every term
+driver value (after the term's `play`, when it has one), that the previous chunk ended with.
+[`DahlCarry`][] does that for every term
 with a `dahl_driver` ([`is_sequential`][]): the torque-path `Hysteresis` and the twist-driven
 `TwistHysteresis` (what the residual loop adds) alike, restarting wherever `SEGMENT_START` is
 set, exactly as on the whole record.
@@ -17,7 +18,7 @@ import numpy as np
 
 from .._features import Signals
 from ._base import SEGMENT_START
-from ._hysteresis import _affine_recurrence
+from ._hysteresis import _affine_recurrence, play
 
 
 def is_sequential(term) -> bool:
@@ -67,6 +68,9 @@ class DahlCarry:
         reset = sig.extras.get(SEGMENT_START)
         reset = np.zeros(driver.shape, bool) if reset is None else np.asarray(reset) != 0
         z0, prev = self.state.get(key, (0.0, None))
+        h = getattr(term, "play", 0.0)
+        if h:  # the play's output is carried as the driver value (`prev`)
+            driver = play(driver, h, reset, prev)
         prev = driver[0] if prev is None else prev
         du = np.diff(driver[:rows], prepend=prev) / term.torque_scale
         r = reset[:rows]

@@ -17,6 +17,7 @@ mechanical vibrations", AIAA Journal 14(12), 1976.
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 import equinox as eqx
@@ -202,6 +203,105 @@ def _initial_jax(u, torque_scale, reset):
     return s[seg] * p
 
 
+def play(
+    driver: SamplesLike,
+    half_width: float,
+    reset: Shaped[ArrayLike, " n"] | None = None,
+    start: float | None = None,
+) -> Float[ArrayLike, " n"]:
+    r"""The play operator (a dead band) on a Dahl driver: $y_k = \min(\max(y_{k-1},
+    u_k - h), u_k + h)$, the output held until the input leaves the band of half-width $h$
+    around it, and $y = u$ at the record's first sample (or, with `start`, the first step taken
+    from $y_{-1}$ = `start`, the value a previous chunk ended with) and at each `reset`.
+
+    A rate-independent memory state moves with every change of its driver, so white noise on
+    the driver random-walks it even while the joint rests (see [`TwistHysteresis`][]); behind
+    a play a few noise deviations wide the state holds at rest, as the joint's does, and in
+    motion it lags the driver by $h$ only. JAX in, JAX out; NumPy in, NumPy out.
+    """
+    u = jnp.asarray(driver, jnp.float64)
+    r = jnp.zeros(u.shape, bool) if reset is None else jnp.asarray(reset).astype(bool)
+    if start is None:
+        r, start = r.at[0].set(True), 0.0
+    y = _play_scan(u, jnp.asarray(half_width, jnp.float64), r, jnp.asarray(start, jnp.float64))
+    return y if isinstance(driver, jax.Array) else np.asarray(y)
+
+
+@jax.jit
+def _play_scan(u, h, reset, y0):
+    def _step(y, x):
+        v, rs = x
+        y = jnp.where(rs, v, jnp.clip(y, v - h, v + h))
+        return y, y
+
+    return jax.lax.scan(_step, y0, (u, reset))[1]
+
+
+def driver_noise(driver: SamplesLike, reset: Shaped[ArrayLike, " n"] | None = None) -> float:
+    r"""The white noise of a Dahl driver per sample, $\sigma$, where the noise is what moves
+    the driver's differences from sample to sample; 0 where the motion does.
+
+    The $k$-th difference of white noise has deviation $\sigma\sqrt{\binom{2k}{k}}$, so
+    $\sigma_k = 1.4826\,\mathrm{MAD}(\Delta^k u)/\sqrt{\binom{2k}{k}}$ is the same for every
+    $k$ (robust to the few large differences of reversals, held samples and gaps; differences
+    across a `reset` are left out). A steady speed leaves no trace from $k = 2$ on, but a motion
+    whose speed changes by more than the noise between samples adds most to the low differences
+    and less to each higher one, so $\sigma_k$ falls with $k$. The noise is $\sigma_2$ when
+    $\sigma_2, \sigma_3, \sigma_4$ agree within `WHITE_SPREAD`; otherwise the changes from
+    sample to sample are the motion's own (a low sampling rate, a fast motion, an encoder whose
+    quantum exceeds its noise), the noise cannot be told from them, and it is reported as 0.
+    """
+    sig = noise_deviations(driver, reset)
+    if min(sig) <= 0.0 or max(sig) > WHITE_SPREAD * min(sig):
+        return 0.0
+    return sig[0]
+
+
+def noise_deviations(
+    driver: SamplesLike, reset: Shaped[ArrayLike, " n"] | None = None
+) -> tuple[float, float, float]:
+    r"""$(\sigma_2, \sigma_3, \sigma_4)$ of [`driver_noise`][]: the deviation of white noise
+    that the driver's $k$-th differences would have, $1.4826\,\mathrm{MAD}(\Delta^k u)
+    /\sqrt{\binom{2k}{k}}$, for $k = 2, 3, 4$ (0 for each when too few differences)."""
+    u = np.asarray(driver, np.float64)
+    keep = np.ones(u.size, bool) if reset is None else np.asarray(reset) == 0
+    sig = []
+    for k in (2, 3, 4):
+        d = np.diff(u, k)
+        ok = np.ones(d.size, bool)
+        for j in range(1, k + 1):  # a difference spans samples i..i+k: no restart after i
+            ok &= keep[j : j + d.size]
+        d = d[ok]
+        if d.size < 20:
+            return (0.0, 0.0, 0.0)
+        mad = float(np.median(np.abs(d - np.median(d))))
+        sig.append(1.4826 * mad / math.sqrt(math.comb(2 * k, k)))
+    return tuple(sig)
+
+
+WHITE_SPREAD = 1.15
+"""The most the noise deviations from the second, third and fourth differences may differ (a
+ratio) for [`driver_noise`][] to read them as white noise: white noise gives 1 to within a few
+per cent, and `benchmarks/dahl_noise.py` reports the ratio on simulated slow sweeps with white
+encoder noise."""
+
+
+def twist_play(sig: Signals, compliance: float, deviations: float = 3.0) -> float:
+    """The play [N·m of torque path] of a [`TwistHysteresis`][] on these signals: `deviations`
+    times the [`driver_noise`][] of the measured twist over `compliance` (restarting at
+    `SEGMENT_START`), to 3 significant digits; 0 where no white noise is read."""
+    reset = sig.extras.get(SEGMENT_START)
+    h = deviations * driver_noise(np.asarray(sig.twist) / compliance, reset)
+    return float(f"{h:.3g}") if h > 0 else 0.0
+
+
+def _dahl_path(term, sig: Signals, torque, reset) -> Samples:
+    # the driver after the term's play, when it has one (`TwistHysteresis.play`)
+    driver = term.dahl_driver(sig, torque)
+    h = getattr(term, "play", 0.0)
+    return play(driver, h, reset) if h else driver
+
+
 def _dahl_column(
     term: Hysteresis | TwistHysteresis, sig: Signals, torque: SamplesLike | None = None
 ) -> Float[Array, "n k"]:
@@ -209,8 +309,8 @@ def _dahl_column(
     of `term.dahl_driver` as one column, restarted at `SEGMENT_START` from the state
     `term.initial` $\\zeta$ times the first motion's direction ([`dahl_initial`][])."""
     term = opaque_hypers(term)  # constants round as traced values do
-    driver = term.dahl_driver(sig, torque)
     reset = sig.extras.get(SEGMENT_START)
+    driver = _dahl_path(term, sig, torque, reset)
     z = dahl_state(driver, term.torque_scale, reset)
     zeta = float(getattr(term, "initial", 0.0))
     if zeta:
@@ -225,7 +325,7 @@ def _dahl_column_numpy(
     """NumPy reference of `_dahl_column`."""
     reset = sig.extras.get(SEGMENT_START)
     reset = None if reset is None else np.asarray(reset)
-    driver = np.asarray(term.dahl_driver(sig, torque))
+    driver = np.asarray(_dahl_path(term, sig, torque, reset))
     z = dahl_state_numpy(driver, term.torque_scale, reset)
     zeta = float(getattr(term, "initial", 0.0))
     if zeta:
@@ -291,14 +391,26 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
     joint that starts unloaded, $-1$ for a one-way sweep from rest that starts with the state its
     last motion, the other way, left. The residual loop chooses $\\zeta$ from $\\{-1, 0, 1\\}$
     by cross-validation, with the width.
+
+    **The encoders' noise at rest.** The Dahl law is rate-independent: every change of its
+    driver moves the state, the encoder's white noise as much as the motion. On a slow sweep
+    the noise's steps (tenths of a N·m of torque path per sample) dwarf the motion's, so the
+    state would random-walk while the joint rests and forget its initial state before the
+    joint moves. The driver therefore passes a [`play`][hdjax.effects.play] of half-width
+    `play` [N·m of torque path] first: the residual loop sets it to three deviations of the
+    driver's noise measured on TRAIN ([`twist_play`][]) on a one-way sweep from rest, and to
+    0 (no play) on a record with reversals or where no white noise can be told from the motion
+    ([`driver_noise`][]).
     """
 
     torque_scale: float = hyper(1.0, positive=True)
     compliance: float = hyper(1.0, positive=True)
     initial: float = hyper(0.0)
+    play: float = hyper(0.0)
 
-    static_hypers: ClassVar[tuple[str, ...]] = ("initial",)
-    """The initial state is a constant of the column programs: they branch on it being 0."""
+    static_hypers: ClassVar[tuple[str, ...]] = ("initial", "play")
+    """The initial state and the play are constants of the column programs: they branch on
+    each being 0."""
 
     @property
     def key(self) -> str:
@@ -308,6 +420,8 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
     def names(self) -> tuple[str, ...]:
         """The state's column (with its initial state when not 0)."""
         arg = f"twist/{fmt(self.compliance)}/{fmt(self.torque_scale)}"
+        if self.play:
+            arg += f" ± {fmt(self.play)}"
         return (f"dahl({arg}; from {fmt(self.initial)})" if self.initial else f"dahl({arg})",)
 
     def __check_init__(self):
@@ -315,6 +429,13 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
             raise ConfigError(
                 f"TwistHysteresis: initial (the state at the start, a fraction of the loop "
                 f"height) must lie in [-1, 1], got {self.initial!r}"
+            )
+        if isinstance(self.play, (int, float)) and not (
+            math.isfinite(self.play) and self.play >= 0
+        ):
+            raise ConfigError(
+                f"TwistHysteresis: play (the half-width of the dead band on the state's "
+                f"driver, N·m of torque path) must be finite and >= 0, got {self.play!r}"
             )
 
     lag: ClassVar[bool] = True
@@ -326,9 +447,10 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
 
     def c_code(self, c: AbstractCEmitter) -> CSnippet:
         """The Dahl state of the measured twist for the exported estimator: one step of
-        [`dahl_state`][] per sample, from 0 and without a step at the first sample; the column
-        is the state before this sample's step (one sample late, as the JAX column). A state
-        that starts at `initial` $\ne 0$ takes its sign from the first motion, which a
+        [`dahl_state`][] per sample, from 0 and without a step at the first sample, of the
+        driver after its [`play`][hdjax.effects.play] when `play` > 0; the column is the
+        state before this sample's step (one sample late, as the JAX column). A state that
+        starts at `initial` $\ne 0$ takes its sign from the first motion, which a
         per-sample step has not seen yet: refused."""
         if self.initial:
             return CSnippet(
@@ -341,8 +463,16 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
         z, prev, out = c.state("z"), c.state("prev"), c.state("out")
         d, du = c.local("d"), c.local("du")
         one = c.num(1.0)
+        driver = (f"const {c.real} {d} = {c.signal('twist')} / {c.num(self.compliance)};",)
+        if self.play:  # the play: the driver held within its band (as `play`)
+            raw, h = c.local("raw"), c.num(self.play)
+            driver = (
+                f"const {c.real} {raw} = {c.signal('twist')} / {c.num(self.compliance)};",
+                f"const {c.real} {d} = {c.first} ? {raw} : "
+                f"hdjax_clip({prev}, {raw} - {h}, {raw} + {h});",
+            )
         update = (
-            f"const {c.real} {d} = {c.signal('twist')} / {c.num(self.compliance)};",
+            *driver,
             f"if ({c.first}) {prev} = {d};",
             f"{out} = {z};",
             f"const {c.real} {du} = ({d} - {prev}) / {c.num(self.torque_scale)};",
@@ -544,6 +674,7 @@ class HysteresisFamily(AbstractFamily):
         "dahl_fractions": (0.01, 0.025, 0.05, 0.1, 0.2),
         "dahl_wide_fractions": (0.5, 1.0, 2.0),
         "dahl_initial": True,
+        "dahl_play": 3.0,
     }
 
     def candidates(self, ctx: CandidateContext) -> list[Candidate]:
@@ -557,7 +688,16 @@ class HysteresisFamily(AbstractFamily):
         last motion left, and that may span most of its torque range. A record with reversals
         identifies its loops at the reversals; there the state at the start is forgotten
         within a loop width, and a loop much wider than the torque varies within stands in for
-        any slow drift (a temperature, say), so neither is offered."""
+        any slow drift (a temperature, say), so neither is offered.
+
+        On a one-way sweep from rest the states' driver also passes a play of `dahl_play`
+        deviations of its noise ([`twist_play`][]; 0 turns the play off), so that the state
+        holds while the joint rests and its initial state reaches the motion (see
+        [`TwistHysteresis`][]). A record with reversals re-identifies its state at each
+        reversal and gets no play: there the state behind a play is clean enough to fit a
+        sub-arcsecond twist that follows the direction of motion, which the held-out blocks
+        take for hysteresis on joints that have none (the clean-joint false-discovery test
+        fails with the play on every record, and TEST gets worse on those joints)."""
         if not ctx.wants("hysteresis:torque"):
             return []
         # the state follows the measured deformation (stable, needs no estimate)
@@ -572,14 +712,15 @@ class HysteresisFamily(AbstractFamily):
                 "record the joint loaded and unloaded over a wider torque range",
             )
             return []
-        starts = (0.0,)
+        starts, h = (0.0,), 0.0
         if one_way_from_rest(np.asarray(ctx.sig.twist), np.asarray(ctx.sig.omega_l)):
+            h = twist_play(ctx.sig, k, float(ctx.option(self, "dahl_play")))
             fractions += tuple(ctx.option(self, "dahl_wide_fractions"))
             if ctx.option(self, "dahl_initial"):
                 starts = (0.0, -1.0, 1.0)
         return [
             Candidate.of(
-                TwistHysteresis(torque_scale=f * ctx.rated_torque, compliance=k, initial=z0)
+                TwistHysteresis(torque_scale=f * ctx.rated_torque, compliance=k, initial=z0, play=h)
             )
             for f in fractions
             for z0 in starts
