@@ -72,15 +72,18 @@ def critical():
 
 @contextlib.contextmanager
 def handling():
-    """Turn SIGINT and SIGTERM into [`Interrupted`][] while the block runs (main thread only)."""
+    """Turn SIGINT and SIGTERM into [`Interrupted`][] while the block runs (main thread only);
+    one that is ignored (the process was started so) stays ignored."""
     global _pending
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    old = {s: signal.getsignal(s) for s in _SIGNALS}
+    # a signal the process was started with ignored (a background job of a shell, `nohup`)
+    # stays ignored, as the convention of such jobs wants
+    old = {s: h for s in _SIGNALS if (h := signal.getsignal(s)) is not signal.SIG_IGN}
     old_hook = sys.unraisablehook
     _pending = None
-    for s in _SIGNALS:
+    for s in old:
         signal.signal(s, _handler)
     sys.unraisablehook = _quiet_unraisable(old_hook)
     try:

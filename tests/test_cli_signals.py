@@ -25,7 +25,27 @@ pytestmark = pytest.mark.skipif(
 )
 
 
-def _start(tmp_path, *args):
+@pytest.fixture(autouse=True)
+def _terminal_signals():
+    """The in-process tests below run as at a terminal too: SIGINT raises KeyboardInterrupt
+    and SIGTERM ends the process, whatever the test runner inherited."""
+    old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    yield
+    for s, h in old.items():
+        signal.signal(s, h)
+
+
+def _start(tmp_path, *args, ignored=()):
+    """`hdjax` as a user at a terminal starts it: SIGINT and SIGTERM at their defaults, whatever
+    the test runner inherited (a background job of a shell starts with SIGINT ignored, and so
+    would every command it starts); the signals in `ignored` ignored instead."""
+
+    def defaults():
+        for s in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(s, signal.SIG_IGN if s in ignored else signal.SIG_DFL)
+
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     return subprocess.Popen(
         [sys.executable, "-m", "hdjax", *args],
@@ -34,6 +54,7 @@ def _start(tmp_path, *args):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=defaults,
     )
 
 
@@ -94,6 +115,22 @@ def test_signal_mid_run_removes_the_staging_folder(tmp_path, sig, code):
     assert rc == code, err
     assert err.strip().splitlines()[-1] == f"hdjax: interrupted ({sig.name})", err
     assert "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cfg.toml"]
+
+
+def test_a_command_started_with_sigint_ignored_keeps_ignoring_it(tmp_path):
+    # a background job of a shell, or `nohup`: Ctrl-C at the terminal is not meant for it
+    (tmp_path / "cfg.toml").write_text(CONFIG)
+    proc = _start(tmp_path, "run", "cfg.toml", "--out", "o", ignored=(signal.SIGINT,))
+    _wait_for(
+        lambda: False if proc.stderr is None else "estimating torque with the model" in _peek(proc),
+        proc,
+    )
+    proc.send_signal(signal.SIGINT)
+    time.sleep(2.0)
+    assert proc.poll() is None, proc.communicate()  # still running
+    rc, err = _finish(proc, signal.SIGTERM)  # SIGTERM still ends it cleanly
+    assert rc == 143, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cfg.toml"]
 
 
