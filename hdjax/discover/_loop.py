@@ -58,7 +58,7 @@ from .._errors import ConfigError, DataError, HdjaxError
 from .._joint import Joint
 from .._recording import Recording
 from .._solution import RESULTS, Solution
-from ..effects import SEGMENT_START
+from ..effects import SEGMENT_START, one_way_from_rest
 from ._closing import (
     closing_notes,
     effect_amplitudes,
@@ -173,7 +173,8 @@ def _start(train, test, joint, options, phase, notes, say):
 def _discover(train, test, joint, options, progress, context=None) -> Solution:
     say = progress or (lambda _: None)
     t_start = time.perf_counter()
-    if options.chunk and getattr(options.library, "dahl_initial", False):
+    no_initial = bool(options.chunk and getattr(options.library, "dahl_initial", False))
+    if no_initial:
         # a state carried chunk by chunk starts at 0: over a long log its start hardly counts
         options = dataclasses.replace(
             options, library=dataclasses.replace(options.library, dahl_initial=False)
@@ -190,6 +191,8 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
         train, test, joint, options, phase, notes, say
     )
     baseline_model, baseline_est_train = model, est_train
+    if no_initial and "hysteresis:torque" in getattr(options.library, "families", ()):
+        _say_no_initial_state(data, notes)
     plan, options = fold_plan(data, test_data, resid0, options, notes)
     with phase("torque CV"):
         cv = cross_validate(model, data, plan.folds_rec, chunk=options.chunk)
@@ -276,3 +279,17 @@ __all__ = [
     "discover",
     "HdjaxError",
 ]
+
+
+def _say_no_initial_state(data, notes: list[str]) -> None:
+    """With `chunk`, memory states start at 0: on a one-way sweep from rest, where hysteresis
+    is the transition from the state the last motion left, that can hide it, so say so."""
+    sig = getattr(data, "sig", None)
+    if sig is None or not one_way_from_rest(np.asarray(sig.twist), np.asarray(sig.omega_l)):
+        return
+    notes.append(
+        "hysteresis:torque is offered only with its state starting at 0: TRAIN is a one-way "
+        "sweep from rest, whose hysteresis is the transition from the state its last motion "
+        "left, and with --chunk the state at the start is not fitted; run without --chunk (or "
+        "on a part of the log that fits in memory) to let the loop fit it"
+    )
