@@ -15,6 +15,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ..effects import play
 from ..effects.internal import is_sequential
 from ._signals import signals_from_recording
 
@@ -32,15 +33,6 @@ def _dahl(du, z0):
         return z, z
 
     return jax.lax.scan(_step, z0, du)
-
-
-def _held_play(driver, h, w, y0):
-    # hdjax.effects.play from the carried value y0, advancing only where w > 0
-    def _step(y, x):
-        v, own = x
-        return (y := jnp.where(own, jnp.clip(y, v - h, v + h), y)), y
-
-    return jax.lax.scan(_step, y0, (driver, w > 0))[1]
 
 
 @eqx.filter_jit
@@ -63,9 +55,10 @@ def fused_columns(model, win, w, z0s):
             z0, prev = z0s[k, 0], z0s[k, 1]
             prev = jnp.where(jnp.isnan(prev), driver[0], prev)
             if getattr(term, "play", 0.0):
-                # the driver after its play (TwistHysteresis), the play's output carried as
-                # the driver value; rows outside the window's own (w = 0) hold it
-                driver = _held_play(driver, term.play, w, prev)
+                # the driver after its play (TwistHysteresis), from the play's output carried
+                # as the driver value: the halo row is the previous window's last, within the
+                # band of that value, so the play holds it there
+                driver = play(driver, term.play, None, prev)
             du = jnp.diff(driver, prepend=prev[None]) * w / term.torque_scale
             z_end, z = _dahl(du, z0)
             z_ends.append(jnp.stack([z_end, driver[last_row]]))

@@ -272,15 +272,6 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
     return Solution(model, RESULTS.successful, stats, aux=record)
 
 
-__all__ = [
-    "DiscoverOptions",
-    "DiscoveryRecord",
-    "DiscoveryStep",
-    "discover",
-    "HdjaxError",
-]
-
-
 def _say_no_initial_state(data, notes: list[str]) -> None:
     """With `chunk`, memory states start at 0: on a one-way sweep from rest, where hysteresis
     is the transition from the state the last motion left, that can hide it, so say so."""
@@ -293,3 +284,12 @@ def _say_no_initial_state(data, notes: list[str]) -> None:
         "left, and with --chunk the state at the start is not fitted; run without --chunk (or "
         "on a part of the log that fits in memory) to let the loop fit it"
     )
+
+
+__all__ = [
+    "DiscoverOptions",
+    "DiscoveryRecord",
+    "DiscoveryStep",
+    "discover",
+    "HdjaxError",
+]

@@ -207,7 +207,7 @@ def play(
     driver: SamplesLike,
     half_width: float,
     reset: Shaped[ArrayLike, " n"] | None = None,
-    start: float | None = None,
+    start: Scalar | None = None,
 ) -> Float[ArrayLike, " n"]:
     r"""The play operator (a dead band) on a Dahl driver: $y_k = \min(\max(y_{k-1},
     u_k - h), u_k + h)$, the output held until the input leaves the band of half-width $h$
