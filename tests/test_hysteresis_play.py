@@ -86,3 +86,20 @@ def test_a_play_keeps_the_state_of_a_noisy_driver_at_rest():
     print(f"state error RMS: without play {without:.3f}, with {with_play:.4f}")
     assert without > 0.3
     assert with_play < 0.05
+
+
+@pytest.mark.parametrize("bad", [-0.5, float("nan"), float("inf")])
+def test_a_negative_or_non_finite_play_is_refused_with_what_it_is(bad):
+    # at construction and from a saved model alike, before anything is traced
+    from hdjax._errors import ConfigError
+    from hdjax.compliance._terms import term_from_dict
+    from hdjax.effects import TwistHysteresis
+
+    with pytest.raises(ConfigError, match=r"TwistHysteresis: play .*N·m of torque path.*>= 0"):
+        TwistHysteresis(torque_scale=10.0, compliance=1e-5, play=bad)
+    saved = {"type": "TwistHysteresis", "torque_scale": 10.0, "compliance": 1e-5, "play": bad}
+    with pytest.raises(ConfigError, match=r"play"):
+        term_from_dict(saved)
+    # a model saved before the play existed loads with none
+    old = term_from_dict({"type": "TwistHysteresis", "torque_scale": 10.0, "compliance": 1e-5})
+    assert old.play == 0.0
