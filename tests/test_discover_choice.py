@@ -9,6 +9,8 @@
   other is not chosen, even with the lower error; otherwise, or when not tied, the error
   chooses.
 - An alias of a shortlisted candidate takes no place on the shortlist.
+- The shortlist's second round is tried only when no trial of the first qualifies.
+- A speed-term trial is replaced by the trial of the reading the current supports.
 - A record that moves at one speed is told apart from one whose speed varies: the share of
   moving samples near the median speed, counted on speed profiles built by hand.
 """
@@ -19,7 +21,14 @@ import numpy as np
 
 from hdjax.discover import DiscoverOptions
 from hdjax.discover._aliases import unspanned_share
-from hdjax.discover._decision import Ranked, Trial, choose, eligible
+from hdjax.discover._decision import (
+    Ranked,
+    Trial,
+    choose,
+    eligible,
+    read_speed_trials,
+    shortlist_rounds,
+)
 from hdjax.discover._folds import GAP_FACTOR, MEMORY_GAP, memory_starts, segment_starts
 from hdjax.discover._pipeline import CrossValidation, pipeline_signals, within_one_se
 from hdjax.effects import SEGMENT_START
@@ -117,16 +126,87 @@ def _ranked(key):
     return Ranked(cand, 0.5, np.zeros(5), True, 1.0, [])
 
 
+def _keys(rounds):
+    return [r.candidate.key for r in rounds]
+
+
 def test_an_alias_of_a_shortlisted_candidate_takes_no_place():
     ranked = [_ranked(k) for k in ("viscous:omega_m", "skew:encoders", "viscous:omega_l")]
     ranked += [_ranked("hysteresis:torque"), _ranked("coulomb:omega_l")]
     speed = {"viscous:omega_m", "skew:encoders", "viscous:omega_l"}
     aliased = lambda a, b: {a.candidate.key, b.candidate.key} <= speed
     options = DiscoverOptions(n_shortlist=3)
-    keys = [r.candidate.key for r in eligible(ranked, options, aliased)]
+    keys = _keys(eligible(ranked, options, aliased))
     assert keys == ["viscous:omega_m", "hysteresis:torque", "coulomb:omega_l"]
-    keys = [r.candidate.key for r in eligible(ranked, options)]
-    assert keys == ["viscous:omega_m", "skew:encoders", "viscous:omega_l"]
+    keys = _keys(eligible(ranked, options))
+    assert keys == [*("viscous:omega_m", "skew:encoders", "viscous:omega_l")] + [
+        "hysteresis:torque",
+        "coulomb:omega_l",
+    ]
+
+
+def test_a_speed_trial_stands_for_the_reading_the_current_supports(monkeypatch):
+    import hdjax.discover._decision as decision
+
+    reading = {"viscous:omega_m": "skew:encoders", "skew:encoders": "skew:encoders"}
+    monkeypatch.setattr(decision, "_reading", lambda t, data: (reading.get(t.key), ""))
+    viscous, memory = _trial("viscous:omega_m", [4.0]), _trial("hysteresis:torque", [3.0])
+    skew = _trial("skew:encoders", [1.0])
+    data = pipeline_signals(synthetic_recording(0, n=500), JOINT.ratio, 1.0, "difference")
+    asked = []
+
+    def try_key(key, answer=skew):
+        asked.append(key)
+        return answer
+
+    out = read_speed_trials([viscous, memory], data, try_key)
+    assert [t.key for t in out] == ["skew:encoders", "hysteresis:torque"] and asked == [skew.key]
+    # the reading's own trial refused (it does not qualify): the trial stays
+    out = read_speed_trials([viscous, memory], data, lambda key: None)
+    assert [t.key for t in out] == ["viscous:omega_m", "hysteresis:torque"]
+    # the reading's key already tried (in this round or an earlier one): not tried again
+    asked.clear()
+    assert read_speed_trials([viscous, skew], data, try_key) == [viscous, skew]
+    assert read_speed_trials([viscous], data, try_key, frozenset({skew.key})) == [viscous]
+    assert asked == []
+    # no current to decide by: the trial stands
+    reading.clear()
+    assert read_speed_trials([viscous], data, try_key) == [viscous] and asked == []
+
+
+def test_a_second_round_of_the_shortlist_is_tried_only_when_no_trial_of_the_first_qualifies():
+    ranked = [_ranked(k) for k in ("a", "b", "c", "d", "e", "f", "g", "h")]
+    options = DiscoverOptions(n_shortlist=3)
+    current = 10.0
+    refused = (1.0 - options.min_torque_gain / 2) ** 2 * current**2  # squared errors
+    accepted = (0.5 * current) ** 2
+    rounds = []
+
+    def try_round(errors):
+        def run(part, trials):
+            rounds.append(_keys(part))
+            return trials + [_trial(r.candidate.key, [errors[r.candidate.key]] * 4) for r in part]
+
+        return run
+
+    # every trial of the first round refused: the next three are tried, and no third round
+    errors = dict.fromkeys("abcdefgh", refused)
+    shortlist, trials = shortlist_rounds(ranked, options, current, try_round(errors))
+    assert rounds == [["a", "b", "c"], ["d", "e", "f"]]
+    assert _keys(shortlist) == list("abcdef") and [t.key for t in trials] == list("abcdef")
+    # one of the first round qualifies: the second is not tried
+    rounds.clear()
+    shortlist_rounds(ranked, options, current, try_round({**errors, "b": accepted}))
+    assert rounds == [["a", "b", "c"]]
+    # one round only, as before the rounds
+    rounds.clear()
+    one = DiscoverOptions(n_shortlist=3, n_shortlist_rounds=1)
+    shortlist_rounds(ranked, one, current, try_round(errors))
+    assert rounds == [["a", "b", "c"]]
+    # fewer eligible than a round: one short round
+    rounds.clear()
+    shortlist_rounds(ranked[:2], options, current, try_round(errors))
+    assert rounds == [["a", "b"]]
 
 
 def test_a_sweep_at_one_speed_is_told_from_a_varying_speed():

@@ -108,8 +108,8 @@ def eligible(
 ) -> list[Ranked]:
     """The shortlist of [`rank`][]'s ranking: selected by the sparse regression, removing at
     least `min_gain` of the cross-validated twist error on the standard folds, and stable
-    (doing so in at least `min_stability` of the resampled fold assignments); at most
-    `n_shortlist` of them.
+    (doing so in at least `min_stability` of the resampled fold assignments), best first
+    ([`shortlist_rounds`][] takes them in rounds).
 
     With `aliased(r, s)` (whether TRAIN can tell `r` from an earlier `s`), an alias of a
     candidate already on the list takes no place of its own: its trial would score the same
@@ -124,9 +124,38 @@ def eligible(
         if aliased is not None and any(aliased(r, s) for s in out):
             continue
         out.append(r)
-        if len(out) == options.n_shortlist:
-            break
     return out
+
+
+def shortlist_rounds(
+    eligible_: list[Ranked],
+    options: DiscoverOptions,
+    current_rms: float,
+    try_round: Callable[[list[Ranked], list[Trial]], list[Trial]],
+) -> tuple[list[Ranked], list[Trial]]:
+    """The shortlist and its trials: the eligible candidates in rounds of `n_shortlist`, at
+    most `n_shortlist_rounds` of them, a round tried (`try_round(round, trials so far)` returns
+    all trials after it) only when no trial before it [`qualifies`][] against the model's
+    cross-validated torque error `current_rms`.
+
+    The twist gain that ranks the candidates is not the torque error that accepts them: on a
+    sweep, an effect that explains much of the twist can extrapolate badly where a fold's
+    held-out block leaves its training part (a memory state, a harmonic over less than a
+    period), while a smaller, simpler one predicts. When every trial of a round is refused,
+    the next eligible candidates get their trials before the loop stops; no round follows one
+    that qualifies, so the cost and the chance of a false step grow only where the loop would
+    otherwise stop.
+    """
+    n = options.n_shortlist
+    shortlist: list[Ranked] = []
+    trials: list[Trial] = []
+    for i in range(0, min(len(eligible_), n * options.n_shortlist_rounds), n):
+        if any(qualifies(t.cv_rms, current_rms, options) for t in trials):
+            break
+        part = eligible_[i : i + n]
+        shortlist += part
+        trials = try_round(part, trials)
+    return shortlist, trials
 
 
 def qualifies(cv_rms: float, current_rms: float, options: DiscoverOptions) -> bool:
@@ -263,6 +292,60 @@ def _twist_per_speed(model: ComplianceModel, key: str) -> float:
     return float("nan")
 
 
+def _reading(trial: Trial, data: PipelineData) -> tuple[str | None, str]:
+    """Which key of [`VELOCITY_KEYS`][] the data supports for a speed-term trial, and the
+    sentence ([`hdjax.effects.velocity_reading`][]): the trial's twist per speed, over the
+    data's compliance where the speed is, against the current's own viscous slope. The key is
+    `None` when the log has no current to decide by."""
+    model = trial.model
+    view = data.view()
+    # the model's own compliance where the speed is (weighted by the speed's square)
+    w = np.asarray(view.sig.omega_l) ** 2
+    seg = np.searchsorted(np.asarray(model.knots), view.torque, side="right")
+    k_local = np.asarray(model.k)[seg]
+    k = float(np.sum(w * k_local) / np.sum(w)) if np.sum(w) > 0 else float("nan")
+    per_speed = _twist_per_speed(model, trial.key) / k if k else float("nan")
+    slope = current_viscous_slope(
+        np.asarray(view.sig.current), view.torque, np.asarray(view.sig.omega_l)
+    )
+    sentence = velocity_reading(per_speed, slope)
+    if slope is None:
+        return None, sentence
+    return ("skew:encoders" if sentence.startswith("skew") else "viscous:omega_l"), sentence
+
+
+def read_speed_trials(
+    trials: list[Trial],
+    data: PipelineData,
+    try_key: Callable[[str], Trial | None],
+    taken: frozenset[str] = frozenset(),
+) -> list[Trial]:
+    """The trials with each speed-term trial ([`VELOCITY_KEYS`][]) replaced by the trial of
+    the reading the current supports ([`_reading`][]), tried through `try_key(key)` unless
+    the reading's key is among the trials or `taken` (tried in an earlier round).
+
+    An encoder skew and viscous friction fit one speed column to first order, so the shortlist
+    gives the group one place ([`eligible`][]), to whichever member the twist gain ranks first.
+    Their trials still differ: the skew is refitted exactly (one encoder interpolated by the
+    delay), a motor-side friction column carries the harmonics of the motor's speed. The group's
+    place is therefore tried with the member the data supports before the trials compete; a
+    trial the current contradicts does not stand for the group (the chosen trial is read
+    again by [`speed_reading`][], which writes the sentence).
+    """
+    out, seen = [], {t.key for t in trials} | taken
+    for t in trials:
+        if t.key in VELOCITY_KEYS:
+            want, _ = _reading(t, data)
+            if want is not None and want != t.key and want not in seen:
+                other = try_key(want)
+                if other is not None:
+                    seen.add(want)
+                    out.append(other)
+                    continue
+        out.append(t)
+    return out
+
+
 def speed_reading(
     best: Trial,
     trials: list[Trial],
@@ -271,27 +354,14 @@ def speed_reading(
     try_key: Callable[[str], Trial | None] | None = None,
 ) -> Trial:
     """When the chosen trial is a speed term ([`VELOCITY_KEYS`][]), which reading the data
-    supports ([`hdjax.effects.velocity_reading`][]): its twist per speed, over the data's
-    compliance, against the current's own viscous slope. The chosen trial is swapped for the
-    other reading's (tried now through `try_key(key)` when it was not among the trials), and
-    the sentence is noted either way."""
+    supports ([`_reading`][]). The chosen trial is swapped for the other reading's (tried now
+    through `try_key(key)` when it was not among the trials), and the sentence is noted either
+    way."""
     key = best.key
     if key not in VELOCITY_KEYS:
         return best
-    model = best.model
-    view = data.view()
-    # the model's own compliance where the speed is (weighted by the speed's square)
-    w = np.asarray(view.sig.omega_l) ** 2
-    seg = np.searchsorted(np.asarray(model.knots), view.torque, side="right")
-    k_local = np.asarray(model.k)[seg]
-    k = float(np.sum(w * k_local) / np.sum(w)) if np.sum(w) > 0 else float("nan")
-    per_speed = _twist_per_speed(model, key) / k if k else float("nan")
-    slope = current_viscous_slope(
-        np.asarray(view.sig.current), view.torque, np.asarray(view.sig.omega_l)
-    )
-    sentence = velocity_reading(per_speed, slope)
-    want = "skew:encoders" if sentence.startswith("skew") else "viscous:omega_l"
-    if slope is not None and key != want:
+    want, sentence = _reading(best, data)
+    if want is not None and key != want:
         other = [t for t in trials if t.key == want]
         if not other and try_key is not None:
             other = [t for t in [try_key(want)] if t is not None]

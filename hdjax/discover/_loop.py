@@ -17,16 +17,18 @@
    `min_stability` of the resampled fold assignments (stability selection).
 5. **Acceptance in the torque domain.** For the `n_shortlist` best eligible candidates (an
    alias of one already shortlisted, whose columns span the same directions on TRAIN, takes
-   no place), the whole pipeline runs per fold: calibration on the fold's training part, then
-   inversion (eqs. (26)-(27)), with memory states computed causally from the estimate exactly
-   as on TEST. A candidate is added only if it lowers that error by at least
-   `min_torque_gain`. Of those within one standard error of the lowest (paired over the
+   no place; a speed term is tried as the reading the motor current supports, an encoder
+   skew or viscous friction), the whole pipeline runs per fold: calibration on the fold's
+   training part, then inversion (eqs. (26)-(27)), with memory states computed causally from
+   the estimate exactly as on TEST. A candidate is added only if it lowers that error by at
+   least `min_torque_gain`. Of those within one standard error of the lowest (paired over the
    held-out blocks: the one-standard-error rule), the one with the fewest columns, then the
    lowest is added; of errors closer than `min_torque_gain` (a tie), one seriously collinear
    with the model's columns gives way to one TRAIN determines more than twice as well (the
    share of a column's variance the model's columns do not span,
-   [`hdjax.discover._aliases.determination`][]). An accepted step never raises it. Stop
-   when none does, or after `max_effects` effects.
+   [`hdjax.discover._aliases.determination`][]). An accepted step never raises it. When no
+   trial qualifies, the next `n_shortlist` eligible candidates are tried, up to
+   `n_shortlist_rounds` rounds; stop when none does, or after `max_effects` effects.
 6. **The gate.** If the final model's cross-validated torque error lies within one standard
    error of the starting model's (paired over the held-out blocks), every step is taken back:
    the run claims no effect the starting model lacks. The whole path is tested first, the

@@ -18,6 +18,9 @@ class DiscoverOptions:
     min_stability: float = 0.7
     n_resamples: int = 20
     n_shortlist: int = 3
+    n_shortlist_rounds: int = 2
+    """Rounds of `n_shortlist` eligible candidates: a round is tried only when no trial of
+    the rounds before it qualifies (the stopping rule)."""
     n_grid_tries: int = 3
     seed: int = 0
     n_folds: int = 5
@@ -53,13 +56,17 @@ def stopping_rule(options: DiscoverOptions) -> str:
         f"twist error ({o.n_folds} folds of whole contiguous blocks of TRAIN) in the standard "
         f"fold assignment and in at least {_percent(o.min_stability)} (min_stability) of "
         f"{o.n_resamples} resampled ones; of the {o.n_shortlist} best eligible candidates (an "
-        "alias of one already among them takes no place), those that lower the cross-validated "
+        "alias of one already among them takes no place, and a speed term is tried as the "
+        "reading the motor current supports, encoder skew or friction), those that lower the "
+        "cross-validated "
         "torque error (whole pipeline per fold: calibration, then inversion) by at least "
         f"{_percent(o.min_torque_gain)} (min_torque_gain) qualify; of those within one standard "
         "error of the lowest (paired over the held-out blocks), the one with the fewest columns, "
         "then the lowest is added, where of errors closer than min_torque_gain one seriously "
         "collinear with the model's columns (variance inflation over 10) gives way to one TRAIN "
-        "determines more than twice as well; stop when none qualifies, or after "
+        "determines more than twice as well; when none qualifies, the next "
+        f"{o.n_shortlist} eligible are tried, up to {o.n_shortlist_rounds} rounds "
+        "(n_shortlist_rounds); stop when none qualifies, or after "
         f"{o.max_effects} effects (max_effects); then, if the final model's error lies within "
         "one standard error of the starting model's, every step is taken back"
     )

@@ -22,6 +22,8 @@ from ._decision import (
     qualifies,
     rank,
     ranking_rows,
+    read_speed_trials,
+    shortlist_rounds,
     speed_reading,
     taken_back_note,
 )
@@ -157,8 +159,15 @@ def add_effects(run: LoopRun, model, est_train, cv, reference: CrossValidation |
             return None
 
         aliased = alias_test(*training_data(model, data, est_train), take=data.part)
-        shortlist = eligible(ranked, options, aliased)
-        trials = _shortlist_trials(shortlist, ranking, try_one, notes, options)
+
+        def try_round(part, trials, try_one=try_one, try_key=try_key):
+            tried = _shortlist_trials(part, ranking, try_one, notes, options)
+            taken = frozenset(t.key for t in trials)
+            return trials + read_speed_trials(tried, data, try_key, taken)
+
+        shortlist, trials = shortlist_rounds(
+            eligible(ranked, options, aliased), options, cv.torque_rms, try_round
+        )
 
         determined = determination(model, data, est_train)
         best = choose(
