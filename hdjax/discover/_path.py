@@ -29,7 +29,7 @@ from ._decision import (
 )
 from ._evaluate import test_errors, twist_rms
 from ._folds import FoldPlan
-from ._options import DiscoverOptions
+from ._options import DiscoverOptions, _percent
 from ._pipeline import CrossValidation, PipelineData, calibrate, cross_validate
 from ._record import DiscoveryStep
 from ._scores import score_candidates, training_data
@@ -160,7 +160,15 @@ def add_effects(run: LoopRun, model, est_train, cv, reference: CrossValidation |
 
         aliased = alias_test(*training_data(model, data, est_train), take=data.part)
 
-        def try_round(part, trials, try_one=try_one, try_key=try_key):
+        def try_round(part, trials, try_one=try_one, try_key=try_key, cv=cv):
+            if trials:
+                notes.append(
+                    f"step {len(steps) + 1}: none of "
+                    + ", ".join(f"{t.key} ({t.cv_rms:.4g} N·m)" for t in trials)
+                    + f" lowers the cross-validated torque error ({cv.torque_rms:.4g} N·m) by "
+                    f"{_percent(options.min_torque_gain)}; the next eligible tried: "
+                    + ", ".join(r.candidate.key for r in part)
+                )
             tried = _shortlist_trials(part, ranking, try_one, notes, options)
             taken = frozenset(t.key for t in trials)
             return trials + read_speed_trials(tried, data, try_key, taken)
