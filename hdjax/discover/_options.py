@@ -18,9 +18,6 @@ class DiscoverOptions:
     min_stability: float = 0.7
     n_resamples: int = 20
     n_shortlist: int = 3
-    n_shortlist_rounds: int = 2
-    """Rounds of `n_shortlist` eligible candidates: a round is tried only when no trial of
-    the rounds before it qualifies (the stopping rule)."""
     n_grid_tries: int = 3
     seed: int = 0
     n_folds: int = 5
@@ -36,6 +33,9 @@ class DiscoverOptions:
     """Samples per chunk of the loop's least-squares fits (calibration, cross-validation,
     candidate scores, intervals), so that no design of the whole record is formed; 0: the
     whole record at once. Same coefficients to 1e-9 relative; memory bounded by the chunk."""
+    n_shortlist_rounds: int = 2
+    """Rounds of `n_shortlist` eligible candidates: a round is tried only when no trial of
+    the rounds before it qualifies (the stopping rule)."""
 
     def __post_init__(self):
         check_chunk(self.chunk)
