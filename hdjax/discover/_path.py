@@ -146,17 +146,24 @@ def add_effects(run: LoopRun, model, est_train, cv, reference: CrossValidation |
         def try_one(cand, gain, folds_, stab, phase=run.phase, model=model, est=est_train, cv=cv):
             return _trial(run, model, cand, gain, folds_, stab, est, cv, phase)
 
-        def try_key(key, ranked=ranked, try_one=try_one, cv=cv):
+        by_key: dict = {}  # this step's trials of try_key, each key tried once
+
+        def try_key(key, ranked=ranked, try_one=try_one, cv=cv, tried=by_key):
             # the reading's own candidate, when the shortlist did not try it: its best member,
             # which must pass the test the chosen trial passed
-            for r in (r for r in ranked if r.candidate.key == key):
-                try:
-                    gain, cand, folds_ = r.members[0]
-                    trial = try_one(cand, gain, folds_, r.stability, null_phases())
-                except (CalibrationError, InversionError):
-                    return None
-                return trial if qualifies(trial.cv_rms, cv.torque_rms, options) else None
-            return None
+            if key not in tried:
+                tried[key] = None
+                for r in (r for r in ranked if r.candidate.key == key):
+                    try:
+                        gain, cand, folds_ = r.members[0]
+                        tried[key] = try_one(cand, gain, folds_, r.stability, null_phases())
+                    except (CalibrationError, InversionError):
+                        break
+                    for row in (row for row in ranking if row["key"] == key):
+                        row["cv_torque_rms"] = tried[key].cv_rms
+                    break
+            trial = tried[key]
+            return trial if trial and qualifies(trial.cv_rms, cv.torque_rms, options) else None
 
         aliased = alias_test(*training_data(model, data, est_train), take=data.part)
 
