@@ -18,7 +18,9 @@
 import types
 
 import numpy as np
+import pytest
 
+from hdjax._errors import ConfigError
 from hdjax.discover import DiscoverOptions
 from hdjax.discover._aliases import unspanned_share
 from hdjax.discover._decision import (
@@ -203,6 +205,10 @@ def test_a_second_round_of_the_shortlist_is_tried_only_when_no_trial_of_the_firs
     one = DiscoverOptions(n_shortlist=3, n_shortlist_rounds=1)
     shortlist_rounds(ranked, one, current, try_round(errors))
     assert rounds == [["a", "b", "c"]]
+    # a round of no candidates, or no round at all, is refused before anything runs
+    for bad in ({"n_shortlist": 0}, {"n_shortlist_rounds": 0}, {"n_shortlist_rounds": -2}):
+        with pytest.raises(ConfigError, match=next(iter(bad))):
+            DiscoverOptions(**bad)
     # fewer eligible than a round: one short round
     rounds.clear()
     shortlist_rounds(ranked[:2], options, current, try_round(errors))

@@ -328,9 +328,10 @@ def read_speed_trials(
     gives the group one place ([`eligible`][]), to whichever member the twist gain ranks first.
     Their trials still differ: the skew is refitted exactly (one encoder interpolated by the
     delay), a motor-side friction column carries the harmonics of the motor's speed. The group's
-    place is therefore tried with the member the data supports before the trials compete; a
-    trial the current contradicts does not stand for the group (the chosen trial is read
-    again by [`speed_reading`][], which writes the sentence).
+    place is therefore tried with the member the data supports before the trials compete: a
+    trial the current contradicts is replaced when the reading's own trial qualifies, and
+    kept otherwise (the chosen trial is read again by [`speed_reading`][], which writes the
+    sentence).
     """
     out, seen = [], {t.key for t in trials} | taken
     for t in trials:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from .._errors import ConfigError
 from ._chunked import check_chunk
 from ._library import LibraryOptions
 
@@ -39,6 +40,12 @@ class DiscoverOptions:
 
     def __post_init__(self):
         check_chunk(self.chunk)
+        for name in ("n_shortlist", "n_shortlist_rounds"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(
+                    f"discover {name} must be a whole number of at least 1, got {value!r}"
+                )
 
 
 def _percent(fraction: float) -> str:
@@ -64,9 +71,14 @@ def stopping_rule(options: DiscoverOptions) -> str:
         "error of the lowest (paired over the held-out blocks), the one with the fewest columns, "
         "then the lowest is added, where of errors closer than min_torque_gain one seriously "
         "collinear with the model's columns (variance inflation over 10) gives way to one TRAIN "
-        "determines more than twice as well; when none qualifies, the next "
-        f"{o.n_shortlist} eligible are tried, up to {o.n_shortlist_rounds} rounds "
-        "(n_shortlist_rounds); stop when none qualifies, or after "
+        "determines more than twice as well; "
+        + (
+            f"when none qualifies, the next {o.n_shortlist} eligible are tried, up to "
+            f"{o.n_shortlist_rounds} rounds in all (n_shortlist_rounds); "
+            if o.n_shortlist_rounds > 1
+            else ""
+        )
+        + "stop when none qualifies, or after "
         f"{o.max_effects} effects (max_effects); then, if the final model's error lies within "
         "one standard error of the starting model's, every step is taken back"
     )

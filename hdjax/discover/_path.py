@@ -146,7 +146,7 @@ def add_effects(run: LoopRun, model, est_train, cv, reference: CrossValidation |
         def try_one(cand, gain, folds_, stab, phase=run.phase, model=model, est=est_train, cv=cv):
             return _trial(run, model, cand, gain, folds_, stab, est, cv, phase)
 
-        by_key: dict = {}  # this step's trials of try_key, each key tried once
+        by_key: dict = {}  # this step's trials by key (None: could not be calibrated)
 
         def try_key(key, ranked=ranked, try_one=try_one, cv=cv, tried=by_key):
             # the reading's own candidate, when the shortlist did not try it: its best member,
@@ -168,6 +168,8 @@ def add_effects(run: LoopRun, model, est_train, cv, reference: CrossValidation |
         aliased = alias_test(*training_data(model, data, est_train), take=data.part)
 
         def try_round(part, trials, try_one=try_one, try_key=try_key, cv=cv):
+            # a key try_key has already calibrated is not calibrated again
+            part = [r for r in part if by_key.get(r.candidate.key) is None]
             if trials:
                 notes.append(
                     f"step {len(steps) + 1}: none of "
@@ -177,7 +179,8 @@ def add_effects(run: LoopRun, model, est_train, cv, reference: CrossValidation |
                     + ", ".join(r.candidate.key for r in part)
                 )
             tried = _shortlist_trials(part, ranking, try_one, notes, options)
-            taken = frozenset(t.key for t in trials)
+            by_key.update({t.key: t for t in tried})
+            taken = frozenset(t.key for t in trials) | {r.candidate.key for r in part}
             return trials + read_speed_trials(tried, data, try_key, taken)
 
         shortlist, trials = shortlist_rounds(
@@ -191,7 +194,9 @@ def add_effects(run: LoopRun, model, est_train, cv, reference: CrossValidation |
         if best is None:
             notes.append(no_step_note(trials, shortlist, cv, options))
             break
-        best = speed_reading(best, trials, data, notes, try_key)
+        # the reading's trial must pass the test the chosen trial passed
+        passing = [t for t in trials if qualifies(t.cv_rms, cv.torque_rms, options)]
+        best = speed_reading(best, passing, data, notes, try_key)
         step = _step(run, best, model, est_train, ranked, ranking, spectra)
         model, est_train, cv = best.model, best.estimate, best.cv
         steps.append(step)
