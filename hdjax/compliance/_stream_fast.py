@@ -15,8 +15,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ..effects import play
-from ..effects.internal import is_sequential
+from ..effects.internal import after_play, is_sequential
 from ._signals import signals_from_recording
 
 
@@ -54,11 +53,10 @@ def fused_columns(model, win, w, z0s):
             # as at the very start); halo and padding rows (w = 0) leave the state unchanged
             z0, prev = z0s[k, 0], z0s[k, 1]
             prev = jnp.where(jnp.isnan(prev), driver[0], prev)
-            if getattr(term, "play", 0.0):
-                # the driver after its play (TwistHysteresis), from the play's output carried
-                # as the driver value: the halo row is the previous window's last, within the
-                # band of that value, so the play holds it there
-                driver = play(driver, term.play, None, prev)
+            # the driver after its play (TwistHysteresis), from the play's output carried as
+            # the driver value: the halo row is the previous window's last, within the band of
+            # that value, so the play holds it there
+            driver = after_play(term, driver, None, prev)
             du = jnp.diff(driver, prepend=prev[None]) * w / term.torque_scale
             z_end, z = _dahl(du, z0)
             z_ends.append(jnp.stack([z_end, driver[last_row]]))

@@ -18,7 +18,7 @@ import numpy as np
 
 from .._features import Signals
 from ._base import SEGMENT_START
-from ._hysteresis import _affine_recurrence, play
+from ._hysteresis import _affine_recurrence, after_play
 
 
 def is_sequential(term) -> bool:
@@ -68,9 +68,7 @@ class DahlCarry:
         reset = sig.extras.get(SEGMENT_START)
         reset = np.zeros(driver.shape, bool) if reset is None else np.asarray(reset) != 0
         z0, prev = self.state.get(key, (0.0, None))
-        h = getattr(term, "play", 0.0)
-        if h:  # the play's output is carried as the driver value (`prev`)
-            driver = play(driver, h, reset, prev)
+        driver = after_play(term, driver, reset, prev)  # its output carried as `prev`
         prev = driver[0] if prev is None else prev
         du = np.diff(driver[:rows], prepend=prev) / term.torque_scale
         r = reset[:rows]

@@ -295,11 +295,16 @@ def twist_play(sig: Signals, compliance: float, deviations: float = 3.0) -> floa
     return float(f"{h:.3g}") if h > 0 else 0.0
 
 
-def _dahl_path(term, sig: Signals, torque, reset) -> Samples:
-    # the driver after the term's play, when it has one (`TwistHysteresis.play`)
-    driver = term.dahl_driver(sig, torque)
+def after_play(term, driver: SamplesLike, reset=None, start: Scalar | None = None):
+    """`term`'s Dahl `driver` after the term's [`play`][] (`TwistHysteresis.play`; a term
+    without one, or with 0, leaves it as it is): the one place every Dahl state of a term,
+    whole or chunk by chunk, passes the play."""
     h = getattr(term, "play", 0.0)
-    return play(driver, h, reset) if h else driver
+    return play(driver, h, reset, start) if h else driver
+
+
+def _dahl_path(term, sig: Signals, torque, reset) -> Samples:
+    return after_play(term, term.dahl_driver(sig, torque), reset)
 
 
 def _dahl_column(

@@ -10,6 +10,7 @@ from ._dahl_carry import (
     is_sequential as is_sequential,
 )
 from ._fields import concrete as concrete
+from ._hysteresis import after_play as after_play
 from ._skew import BACK_SAMPLES as BACK_SAMPLES
 from ._traced import (
     join_hypers as join_hypers,
