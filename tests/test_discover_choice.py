@@ -24,12 +24,14 @@ from hdjax._errors import ConfigError
 from hdjax.discover import DiscoverOptions
 from hdjax.discover._aliases import unspanned_share
 from hdjax.discover._decision import (
+    VELOCITY_KEYS,
     Ranked,
     Trial,
     choose,
     eligible,
     read_speed_trials,
     shortlist_rounds,
+    speed_reading,
 )
 from hdjax.discover._folds import GAP_FACTOR, MEMORY_GAP, memory_starts, segment_starts
 from hdjax.discover._pipeline import CrossValidation, pipeline_signals, within_one_se
@@ -174,6 +176,31 @@ def test_a_speed_trial_stands_for_the_reading_the_current_supports(monkeypatch):
     # no current to decide by: the trial stands
     reading.clear()
     assert read_speed_trials([viscous], data, try_key) == [viscous] and asked == []
+
+
+def test_the_current_tells_skew_from_friction_but_never_one_side_from_the_other(monkeypatch):
+    """A friction reading keeps the trial's own side: the current's viscous slope holds the
+    friction of both sides, so it cannot move a motor-side trial to the output side."""
+    import hdjax.discover._decision as decision
+
+    data = pipeline_signals(synthetic_recording(0, n=500), JOINT.ratio, 1.0, "difference")
+    model = types.SimpleNamespace(knots=np.zeros(0), k=np.full(1, 1.0 / 6.7e4))
+    per_speed = {"value": 0.0}  # the twist's speed term [N·m per rad/s of link speed]
+    monkeypatch.setattr(decision, "_twist_per_speed", lambda m, key: per_speed["value"] / 6.7e4)
+    monkeypatch.setattr(decision, "current_viscous_slope", lambda *a: (2.0, 0.1))
+    motor, output, skew = (_trial(k, [1.0]) for k in VELOCITY_KEYS[::-1])
+    for t in (motor, output, skew):
+        object.__setattr__(t, "model", model)  # only its compliance is read (frozen: set once)
+    notes: list[str] = []
+    # a speed term within the current's friction: friction, on the side the trial has
+    assert speed_reading(motor, [output, motor], data, notes) is motor
+    assert speed_reading(output, [output, motor], data, notes) is output
+    assert speed_reading(skew, [skew, motor, output], data, notes) is output
+    assert notes[0].startswith("viscous:omega_m: friction, not skew"), notes
+    # one far over it: the skew, from either side
+    per_speed["value"] = 60.0
+    assert speed_reading(motor, [motor, skew], data, notes) is skew
+    assert speed_reading(output, [output, skew], data, notes) is skew
 
 
 def test_a_second_round_of_the_shortlist_is_tried_only_when_no_trial_of_the_first_qualifies():

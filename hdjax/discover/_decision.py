@@ -311,7 +311,19 @@ def _reading(trial: Trial, data: PipelineData) -> tuple[str | None, str]:
     sentence = velocity_reading(per_speed, slope)
     if slope is None:
         return None, sentence
-    return ("skew:encoders" if sentence.startswith("skew") else "viscous:omega_l"), sentence
+    return supported_key(trial.key, sentence.startswith("skew")), sentence
+
+
+def supported_key(key: str, skew: bool) -> str:
+    """The key of [`VELOCITY_KEYS`][] that a reading supports for a trial of `key`: the skew
+    when the current's viscous slope is too small for the twist's speed term (`skew`), else
+    friction on the trial's own side (`viscous:omega_l` for a skew trial: friction the twist
+    sees against the output torque acts at the output). The current holds the friction of
+    both sides in one slope, so it tells a skew from friction, never one side from the other.
+    """
+    if skew:
+        return "skew:encoders"
+    return key if key.startswith("viscous:") else "viscous:omega_l"
 
 
 def read_speed_trials(
