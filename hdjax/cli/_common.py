@@ -201,9 +201,11 @@ def experiment_inputs(exp) -> list:
     return paths
 
 
-def add_model_options(p: argparse.ArgumentParser, use: str) -> None:
-    """`--model` (a model file or the result folder holding it) and `--method` (which of its
-    estimators; `use` the verb of its help: "use", "export")."""
+def add_model_command(sub, name: str, help: str, example: str, use: str) -> argparse.ArgumentParser:
+    """The parser of a subcommand that reads a saved model ([`add_command`][]): `--model` (a
+    model file or the result folder holding it), `--method` (which of its estimators; `use`
+    the verb of its help: "use", "export") and `--quiet`."""
+    p = add_command(sub, name, help, example)
     p.add_argument(
         "--model",
         required=True,
@@ -216,6 +218,8 @@ def add_model_options(p: argparse.ArgumentParser, use: str) -> None:
         default="model",
         help=f"which estimator of the file to {use} (default: the compliance model)",
     )
+    add_quiet(p)
+    return p
 
 
 def model_file(path) -> Path:
@@ -235,7 +239,9 @@ def model_file(path) -> Path:
 def read_column_map(path):
     """The [`hdjax.ColumnMap`][] of a TOML file's `[data]` table (or of its top level):
     `columns`, `extras` and the CSV text `encoding`; other keys of the table are ignored, so an
-    experiment config serves as a column map."""
+    experiment config serves as a column map; `None` when no file is given (`path` empty)."""
+    if not path:
+        return None
     from pathlib import Path
 
     from ..config import parse_toml  # hdjax.config is heavy: imported on use

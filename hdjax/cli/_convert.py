@@ -94,7 +94,7 @@ def command(args, parser) -> int:
         ours=_is_parquet,
         example="log.parquet",
     )
-    cmap = read_column_map(args.columns) if args.columns else None
+    cmap = read_column_map(args.columns)
     n = convert(args.input, out, cmap, chunk=args.chunk, progress=progress)
     progress(f"wrote {out} ({n} rows)")
     return 0

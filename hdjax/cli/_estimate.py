@@ -18,10 +18,8 @@ from ..network import predict_torque as net_estimate
 from ..report import check_output_file
 from ._common import (
     Progress,
-    add_command,
     add_flag,
-    add_model_options,
-    add_quiet,
+    add_model_command,
     model_file,
     read_column_map,
 )
@@ -38,8 +36,7 @@ a reference torque, torque_measured is added and the RMS / maximum error go to s
 
 
 def add_parser(sub) -> None:
-    p = add_command(sub, "estimate", HELP, EXAMPLE)
-    add_model_options(p, "use")
+    p = add_model_command(sub, "estimate", HELP, EXAMPLE, "use")
     p.add_argument(
         "--data",
         required=True,
@@ -75,7 +72,6 @@ def add_parser(sub) -> None:
         "code of 'hdjax export' computes): the first sample at rest, a smoothed velocity over "
         "the window ending at the sample",
     )
-    add_quiet(p)
 
 
 def command(args, parser) -> int:
@@ -93,7 +89,7 @@ def command(args, parser) -> int:
     model_path = model_file(model_path)
     check_read_memory([args.data], fix="split the log into shorter files and estimate each")
     saved = load_model(model_path)
-    cmap = read_column_map(args.columns) if args.columns else None
+    cmap = read_column_map(args.columns)
     joint = load_joint(args.joint) if args.joint else None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UnitWarning)

@@ -13,10 +13,8 @@ from pathlib import Path
 from ._common import (
     RESULT_OVERWRITE,
     Progress,
-    add_command,
     add_flag,
-    add_model_options,
-    add_quiet,
+    add_model_command,
     model_file,
     read_column_map,
 )
@@ -43,8 +41,7 @@ The step uses the present sample and earlier ones only; it equals 'hdjax estimat
 
 def add_parser(sub) -> None:
     """Register `export` with the `hdjax` command's sub-parsers."""
-    p = add_command(sub, "export", HELP, EXAMPLE)
-    add_model_options(p, "export")
+    p = add_model_command(sub, "export", HELP, EXAMPLE, "export")
     p.add_argument("--out", required=True, help="the folder to write the C code into")
     p.add_argument(
         "--precision",
@@ -80,7 +77,6 @@ def add_parser(sub) -> None:
             "known the estimator gets hdjax_sample_from_counts",
         )
     add_flag(p, "--overwrite", RESULT_OVERWRITE)
-    add_quiet(p)
 
 
 def command(args, parser) -> int:
@@ -107,7 +103,7 @@ def command(args, parser) -> int:
         saved = load_model(path)
         recording = None
         if args.data:
-            cmap = read_column_map(args.columns) if args.columns else None
+            cmap = read_column_map(args.columns)
             recording = load_recording(args.data, cmap)
             check_compatible(saved, recording)
         progress(f"exporting the {args.method} of {path} ({args.precision} precision)")
