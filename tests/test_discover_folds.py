@@ -168,3 +168,44 @@ def test_a_cross_validation_that_scores_no_sample_is_unknown_not_zero():
     assert np.isnan(cv.torque_rms) and np.isnan(cv.twist_rms_arcsec)
     inner = [np.arange(800, 1000), np.arange(1000, 1200)]
     assert np.isfinite(cross_validate(model, data, inner).torque_rms)
+
+
+def test_a_held_out_sample_outside_its_folds_range_of_an_extrapolating_signal_is_not_scored():
+    """The paper's kinematic columns are smooth functions of the output's angle times speed
+    and the wave-generator polynomial one of the current: a held-out sample beyond the
+    training part's range of either is extrapolation, which TEST never asks for. The rows are
+    checked against a direct count, and cross-validation of the paper's model scores exactly
+    those (and more without the kinematic columns)."""
+    from hdjax.discover._pipeline import coverage_arguments, motion_regime, scored_rows
+
+    from .discover_data import synthetic_recording
+
+    data = pipeline_signals(synthetic_recording(0, n=6000), JOINT.ratio, 1.0, "difference")
+    sig = data.sig
+    model = ComplianceModel.paper(JOINT, poly_order=2, kinematic="paper", fourier_order=2)
+    product = np.asarray(sig.theta_l) * np.asarray(sig.omega_l)
+    args = coverage_arguments(model, data)
+    assert len(args) == 2
+    assert np.array_equal(args[0], np.asarray(sig.current)) or np.array_equal(args[1], product)
+    assert {a.tobytes() for a in args} == {np.asarray(sig.current).tobytes(), product.tobytes()}
+    assert (
+        coverage_arguments(ComplianceModel.paper(JOINT, poly_order=0, kinematic="none"), data) == []
+    )
+    folds = fold_assignment(contiguous_blocks(data.starts, 600), 5)
+    regime = motion_regime(np.asarray(sig.omega_l))
+    scored = 0
+    for te, rows in zip(folds, scored_rows(data, folds, args)):
+        train = np.setdiff1d(np.arange(data.n), te)
+        keep = []
+        for i in te:  # one sample at a time, from the definition
+            same = train[regime[train] == regime[i]]
+            ok = same.size and data.torque[same].min() <= data.torque[i] <= data.torque[same].max()
+            for x in args:
+                ok = ok and x[train].min() <= x[i] <= x[train].max()
+            keep.append(bool(ok))
+        assert np.array_equal(rows, te[np.asarray(keep)])
+        scored += rows.size
+    # the extrapolating signals leave rows out that the torque alone keeps
+    assert sum(r.size for r in scored_rows(data, folds)) > scored
+    cv = cross_validate(model, data, folds)
+    assert np.isfinite(cv.squared_errors).sum() == scored

@@ -186,6 +186,9 @@ class FoldPlan(NamedTuple):
     folds_rec: list
     blocks_rec: np.ndarray
     resamples: list
+    scored: list | None = None
+    """Per fold, the held-out rows it scores (`hdjax.discover._pipeline.scored_rows`), fixed
+    from the starting model; None: each cross-validation finds them from its own model."""
 
 
 def fold_plan(data, test_data, resid0, options, notes):

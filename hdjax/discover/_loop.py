@@ -74,8 +74,10 @@ from ._options import DiscoverOptions as DiscoverOptions, stopping_rule
 from ._path import LoopRun, add_effects
 from ._pipeline import (
     context_parts,
+    coverage_arguments,
     cross_validate,
     estimate,
+    scored_rows,
 )
 from ._record import DiscoveryRecord as DiscoveryRecord, DiscoveryStep as DiscoveryStep
 from ._scores import _as_data, score_candidates as score_candidates
@@ -195,9 +197,9 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
     baseline_model, baseline_est_train = model, est_train
     if no_initial and "hysteresis:torque" in getattr(options.library, "families", ()):
         _say_no_initial_state(data, notes)
-    plan, options = fold_plan(data, test_data, resid0, options, notes)
+    plan, options = _fold_plan(model, data, test_data, resid0, options, notes)
     with phase("torque CV"):
-        cv = cross_validate(model, data, plan.folds_rec, chunk=options.chunk)
+        cv = cross_validate(model, data, plan.folds_rec, chunk=options.chunk, scored=plan.scored)
     base_cv = cv
     say(f"baseline: cross-validated torque RMS {cv.torque_rms:.4g} N·m on TRAIN")
     if not np.isfinite(cv.torque_rms):
@@ -272,6 +274,40 @@ def _discover(train, test, joint, options, progress, context=None) -> Solution:
         fit_time_s=time.perf_counter() - t_start,
     )
     return Solution(model, RESULTS.successful, stats, aux=record)
+
+
+def _fold_plan(model, data, test_data, resid0, options, notes):
+    """The folds ([`hdjax.discover._folds.fold_plan`][]) and the held-out rows each scores,
+    fixed from the starting `model`'s coverage, so every structure is scored on the same rows;
+    a note when a fold scores less than half of its held-out rows."""
+    plan, options = fold_plan(data, test_data, resid0, options, notes)
+    plan = plan._replace(scored=scored_rows(data, plan.folds_rec, coverage_arguments(model, data)))
+    notes += coverage_notes(plan)
+    return plan, options
+
+
+MIN_SCORED_SHARE = 0.5
+"""A fold that scores less than this share of its held-out samples is named in the notes."""
+
+
+def coverage_notes(plan) -> list[str]:
+    """A note naming the folds that score less than `MIN_SCORED_SHARE` of their held-out
+    samples ([`hdjax.discover._pipeline.scored_rows`][]), with what the user can do."""
+    low = [
+        (f + 1, s.size / te.size)
+        for f, (te, s) in enumerate(zip(plan.folds_rec, plan.scored))
+        if te.size and s.size < MIN_SCORED_SHARE * te.size
+    ]
+    if not low:
+        return []
+    shares = ", ".join(f"fold {f}: {share:.0%}" for f, share in low)
+    return [
+        f"cross-validation scores only part of some folds' held-out samples ({shares}): the "
+        "rest lie outside what the fold's training part covers (the torque in their motion "
+        "regime, the current, or the output's angle times speed of the paper's kinematic "
+        "columns), where TEST does not ask the model to go; TRAIN that repeats each motion "
+        "(more sweeps, at each speed) leaves fewer such samples"
+    ]
 
 
 def _say_no_initial_state(data, notes: list[str]) -> None:

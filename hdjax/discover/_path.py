@@ -62,7 +62,7 @@ def _trial(run: LoopRun, model, cand, gain, folds_, stab, est_train, cv, phase) 
             model.with_effects(cand.term), data, run.notes, est_train, chunk
         )
     with phase("torque CV"):
-        new_cv = cross_validate(new_model, data, run.plan.folds_rec, cv, chunk)
+        new_cv = cross_validate(new_model, data, run.plan.folds_rec, cv, chunk, run.plan.scored)
     return Trial(cand, gain, folds_, stab, new_model, new_est, new_cv)
 
 
@@ -86,6 +86,30 @@ def _shortlist_trials(shortlist, ranking, try_one, notes, options) -> list[Trial
             trials.append(trial)
             break
     return trials
+
+
+def _key_trier(ranked, ranking, try_one, cv, options, tried: dict):
+    """`try_key(key)`: the trial of `key`'s best member (the reading's own candidate, when the
+    shortlist did not try it), calibrated once per step (kept in `tried`, None when it cannot
+    be calibrated) and returned only when it qualifies against `cv`, the test the chosen
+    trial passed; its cross-validated torque RMS goes into the `ranking` rows."""
+
+    def try_key(key):
+        if key not in tried:
+            tried[key] = None
+            for r in (r for r in ranked if r.candidate.key == key):
+                try:
+                    gain, cand, folds_ = r.members[0]
+                    tried[key] = try_one(cand, gain, folds_, r.stability, null_phases())
+                except (CalibrationError, InversionError):
+                    break
+                for row in (row for row in ranking if row["key"] == key):
+                    row["cv_torque_rms"] = tried[key].cv_rms
+                break
+        trial = tried[key]
+        return trial if trial and qualifies(trial.cv_rms, cv.torque_rms, options) else None
+
+    return try_key
 
 
 class LoopPath(NamedTuple):
@@ -148,23 +172,7 @@ def add_effects(run: LoopRun, model, est_train, cv, reference: CrossValidation |
 
         by_key: dict = {}  # this step's trials by key (None: could not be calibrated)
 
-        def try_key(key, ranked=ranked, try_one=try_one, cv=cv, tried=by_key):
-            # the reading's own candidate, when the shortlist did not try it: its best member,
-            # which must pass the test the chosen trial passed
-            if key not in tried:
-                tried[key] = None
-                for r in (r for r in ranked if r.candidate.key == key):
-                    try:
-                        gain, cand, folds_ = r.members[0]
-                        tried[key] = try_one(cand, gain, folds_, r.stability, null_phases())
-                    except (CalibrationError, InversionError):
-                        break
-                    for row in (row for row in ranking if row["key"] == key):
-                        row["cv_torque_rms"] = tried[key].cv_rms
-                    break
-            trial = tried[key]
-            return trial if trial and qualifies(trial.cv_rms, cv.torque_rms, options) else None
-
+        try_key = _key_trier(ranked, ranking, try_one, cv, options, by_key)
         aliased = alias_test(*training_data(model, data, est_train), take=data.part)
 
         def try_round(part, trials, try_one=try_one, try_key=try_key, cv=cv):

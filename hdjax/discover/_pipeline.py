@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import warnings
+from collections.abc import Sequence
 
 import equinox as eqx
 import jax
@@ -625,15 +626,27 @@ def motion_regime(omega: ArrayLike) -> Int[np.ndarray, " n"]:
     return np.where(rest, 0, np.where(w > 0, 1, 3) + fast)
 
 
-def scored_rows(data: PipelineData, folds: list[np.ndarray]) -> list[np.ndarray]:
+def coverage_arguments(model: ComplianceModel, data: PipelineData) -> list[np.ndarray]:
+    """The signals `model`'s base terms extrapolate in outside their fitted range
+    ([`hdjax.effects.AbstractTerm.extrapolating_arguments`][]): the paper's kinematic
+    argument $\\theta_l\\omega_l$, the current of the wave-generator polynomial."""
+    return [a for t in model.base_terms for a in t.extrapolating_arguments(data.sig)]
+
+
+def scored_rows(
+    data: PipelineData, folds: list[np.ndarray], arguments: Sequence[np.ndarray] = ()
+) -> list[np.ndarray]:
     """Per fold, the held-out rows it scores: those whose regime the fold's training part
     covers, as a TEST recording is covered by TRAIN. A row is covered when the training rows
     in its motion regime ([`motion_regime`][]: at rest, moving slowly or fast forwards or
-    backwards) reach
-    torques on both sides of its own: the fit then interpolates there rather than
+    backwards) reach torques on both sides of its own, and the training rows reach values on
+    both sides of its own of each of `arguments` (the signals the starting model's base terms
+    extrapolate in, [`coverage_arguments`][]): the fit then interpolates there rather than
     extrapolating (a block held out at the end of a one-way sweep asks it to extrapolate, and
-    TEST never does). The mask depends on the data only, so every structure is scored on the
-    same rows."""
+    so does a sweep held out at a speed the training part reaches only at other angles, where
+    the paper's kinematic columns of $\\theta_l\\omega_l$ are fitted; TEST never does). The
+    mask depends on the data and `arguments` only, so the loop, which takes them from its
+    starting model, scores every structure on the same rows."""
     fit = np.zeros(data.n, bool)
     fit[np.arange(data.n) if data.rows is None else data.rows] = True
     regime = motion_regime(np.asarray(data.sig.omega_l))
@@ -647,6 +660,9 @@ def scored_rows(data: PipelineData, folds: list[np.ndarray]) -> list[np.ndarray]
             if tr.size:
                 here = regime[te] == r
                 keep |= here & (data.torque[te] >= tr.min()) & (data.torque[te] <= tr.max())
+        for x in arguments:
+            if train.any():
+                keep &= (x[te] >= x[train].min()) & (x[te] <= x[train].max())
         out.append(te[keep])
     return out
 
@@ -657,13 +673,16 @@ def cross_validate(
     folds: list[np.ndarray],
     previous: CrossValidation | None = None,
     chunk: int = 0,
+    scored: list[np.ndarray] | None = None,
 ) -> CrossValidation:
     """Cross-validated torque and twist error of `model`'s structure (see the module docstring).
 
     `model` is the structure calibrated on all of TRAIN: its active coefficients and torque
     range are kept, so every fold model compiles to the same program. `folds` are the held-out
     rows of each fold (rows of the record; with `data.rows`, among them). Each fold scores the
-    held-out rows its training part covers ([`scored_rows`][]). With `chunk`, the fold fits
+    held-out rows its training part covers ([`scored_rows`][]; `scored`, when given, are those
+    rows: the loop fixes them from its starting model, so that every structure is scored on the
+    same rows; else the coverage of `model`'s base terms). With `chunk`, the fold fits
     are accumulated over chunks of that many samples; in memory and chunked, the folds are
     solved by the same [`FoldSolver`][hdjax.discover._fold_solver.FoldSolver].
     """
@@ -683,7 +702,8 @@ def cross_validate(
     fold_id = np.full(fit.size, -1)
     for f, te in enumerate(folds):
         fold_id[local[te]] = f
-    scored = scored_rows(data, folds)
+    if scored is None:
+        scored = scored_rows(data, folds, coverage_arguments(model, data))
     masks = []
     for s_ in scored:
         masks.append(np.zeros(fit.size, bool))

@@ -122,7 +122,9 @@ def without_kinematic(run: LoopRun, train, found: LoopPath, base_cv: CrossValida
             model = calibrate_baseline(train, run.joint, alt_options, notes)
             est_train = estimate(model, run.data)
         with run.phase("torque CV"):
-            cv = cross_validate(model, run.data, run.plan.folds_rec, chunk=options.chunk)
+            cv = cross_validate(
+                model, run.data, run.plan.folds_rec, chunk=options.chunk, scored=run.plan.scored
+            )
     except (CalibrationError, InversionError) as err:
         why = (
             "second path (from the starting structure without the kinematic columns) not "

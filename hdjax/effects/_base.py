@@ -175,6 +175,15 @@ class AbstractTerm(eqx.Module):
     def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         """The columns computed in NumPy (the reference for `columns`)."""
 
+    def extrapolating_arguments(self, sig: Signals) -> tuple[np.ndarray, ...]:
+        """The signals (NumPy, one value per sample) in which a fit of this term, as a base
+        term of a starting model, extrapolates outside the range it was fitted on: those its
+        columns are smooth, non-periodic functions of over a record. The residual loop's
+        cross-validation scores a held-out sample only inside its fold's fitted range of
+        each, as a TEST recording covered by TRAIN is. None by default (a function of the
+        torque is covered by the torque's own range)."""
+        return ()
+
 
 class AbstractTorqueFreeTerm(AbstractTerm):
     """A term that does not depend on the torque (`torque_kind = "none"`)."""

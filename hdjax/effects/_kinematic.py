@@ -92,6 +92,13 @@ class PaperFourier(AbstractColumnListTerm):
             cols += [cl, sl, cm, sm]
         return cols
 
+    def extrapolating_arguments(self, sig: Signals) -> tuple[np.ndarray, ...]:
+        """The output's $\\theta\\omega$: on a joint's swing it stays under a radian or two, so
+        its harmonics cover less than a period there and a fit of them is a smooth function
+        of it (a held-out sweep at another speed leaves its training part's range). The
+        motor's $\\theta\\omega$ turns through many periods."""
+        return (np.asarray(sig.theta_l, np.float64) * np.asarray(sig.omega_l, np.float64),)
+
     def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         ul = np.asarray(sig.theta_l) * np.asarray(sig.omega_l)
         um = np.asarray(sig.theta_m) * np.asarray(sig.omega_m)

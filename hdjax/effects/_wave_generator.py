@@ -55,6 +55,10 @@ class CurrentPolynomial(AbstractColumnListTerm):
             out.append(out[-1] * x)
         return out
 
+    def extrapolating_arguments(self, sig: Signals) -> tuple[np.ndarray, ...]:
+        """The current: a polynomial extrapolates outside the range it was fitted on."""
+        return (np.asarray(sig.current, np.float64),)
+
     def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         x = np.asarray(sig.current) / self.scale
         return np.column_stack([x ** (i + 1) for i in range(self.order)])
