@@ -175,7 +175,7 @@ class AbstractTerm(eqx.Module):
     def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         """The columns computed in NumPy (the reference for `columns`)."""
 
-    def extrapolating_arguments(self, sig: Signals) -> tuple[np.ndarray, ...]:
+    def extrapolating_arguments(self, sig: Signals) -> tuple[Float[np.ndarray, " n"], ...]:
         """The signals (NumPy, one value per sample) in which a fit of this term, as a base
         term of a starting model, extrapolates outside the range it was fitted on: those its
         columns are smooth, non-periodic functions of over a record. The residual loop's

@@ -92,7 +92,7 @@ class PaperFourier(AbstractColumnListTerm):
             cols += [cl, sl, cm, sm]
         return cols
 
-    def extrapolating_arguments(self, sig: Signals) -> tuple[np.ndarray, ...]:
+    def extrapolating_arguments(self, sig: Signals) -> tuple[Float[np.ndarray, " n"], ...]:
         """The output's $\\theta\\omega$: on a joint's swing it stays under a radian or two, so
         its harmonics cover less than a period there and a fit of them is a smooth function
         of it (a held-out sweep at another speed leaves its training part's range). The

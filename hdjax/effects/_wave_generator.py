@@ -55,7 +55,7 @@ class CurrentPolynomial(AbstractColumnListTerm):
             out.append(out[-1] * x)
         return out
 
-    def extrapolating_arguments(self, sig: Signals) -> tuple[np.ndarray, ...]:
+    def extrapolating_arguments(self, sig: Signals) -> tuple[Float[np.ndarray, " n"], ...]:
         """The current: a polynomial extrapolates outside the range it was fitted on."""
         return (np.asarray(sig.current, np.float64),)
 
