@@ -28,6 +28,7 @@ from .._custom_types import Array, ArrayLike, Float, Int
 from .._errors import ConfigError
 from .._joint import Joint
 from ..effects import AbstractTerm, Constant, CurrentPolynomial, Harmonics, PaperFourier
+from ..effects.internal import coupled
 from ._signals import VELOCITY_METHODS, Signals
 from ._terms import term_from_dict, term_to_dict
 
@@ -198,7 +199,7 @@ class ComplianceModel(eqx.Module):
         return cls(
             coef=jnp.zeros(n, jnp.float64),
             base_terms=tuple(base_terms),
-            effect_terms=tuple(effect_terms),
+            effect_terms=coupled(effect_terms),
             per_segment=per_segment,
             active=(True,) * n,
             **static,

@@ -20,9 +20,12 @@ from ._signals import signals_from_recording
 
 
 def fast_path_supported(model) -> bool:
-    """Backward-difference velocity, and path terms only of the Dahl kind (one column)."""
+    """Backward-difference velocity, and path terms only of the Dahl kind (one column) whose
+    driver reads no sample before the window's one-sample halo (`lookback`)."""
     paths = [t for t in model.effect_terms if t.torque_kind == "path" or is_sequential(t)]
-    ok = all(is_sequential(t) and len(t.names()) == 1 for t in paths)
+    ok = all(
+        is_sequential(t) and len(t.names()) == 1 and not getattr(t, "lookback", 0) for t in paths
+    )
     return model.velocity == "difference" and ok
 
 

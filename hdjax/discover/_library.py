@@ -436,6 +436,11 @@ def build_library(
     cands: list[Candidate] = []
     for family in effects.families():
         cands += family.candidates(ctx)
+    # each screened as the model it would join reads it (a hysteresis beside a skew follows
+    # the twist at one instant, `AbstractTerm.beside`)
+    cands = [
+        dataclasses.replace(c, term=c.term.beside((*ctx.existing_terms, c.term))) for c in cands
+    ]
     held = [k for k in model.effect_keys if k in VELOCITY_KEYS]
     twins = sorted({c.key for c in cands if c.key in VELOCITY_KEYS} - set(held))
     if held and twins:

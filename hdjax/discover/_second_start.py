@@ -7,6 +7,7 @@ import dataclasses
 
 import numpy as np
 
+from .._custom_types import Int
 from .._errors import CalibrationError, InversionError
 from ..effects import PaperFourier
 from ._aliases import _model_rows, _strided, first_canonical_r2
@@ -32,10 +33,18 @@ KINEMATIC_FREE = (
     "the final model leaves out the starting model's kinematic columns (Song et al. eq. (9), "
     "functions of the product of angle and speed): from the same starting structure without "
     "them, the loop's path reaches a cross-validated torque RMS of {alt:.4g} N·m against "
-    "{own:.4g} N·m with them (beyond one standard error, paired over the held-out blocks). On "
+    "{own:.4g} N·m with them ({why}). On "
     "a slow motion those columns are nearly proportional to the speed, so they take up what a "
     "speed-dependent effect (encoder skew, friction, hysteresis) explains physically; the "
     'model written holds the structure found ([model] kinematic = "none" for hdjax run)'
+)
+
+
+BEYOND = "lower beyond one standard error, paired over the held-out blocks"
+FEWER = (
+    "within one standard error, paired over the held-out blocks, with {alt} coefficients "
+    "against {own}: of structures the held-out blocks cannot tell apart, the one-standard-error "
+    "rule keeps the simpler"
 )
 
 
@@ -79,19 +88,48 @@ def kinematic_share(model, data, est_train, last: list[bool]) -> float:
     return first_canonical_r2(rows[:, kinematic], rows[:, cols])
 
 
+def second_path_reason(
+    found: CrossValidation,
+    alt: CrossValidation,
+    n_coef: tuple[int, int],
+    blocks: Int[np.ndarray, " n"],
+    options,
+) -> str | None:
+    """Why the path from the structure without the paper's kinematic columns (`alt`) is kept
+    over the configured one (`found`), or `None` when it is not. `n_coef` holds the two final
+    models' coefficient counts, `(found's, alt's)`.
+
+    The one-standard-error rule (Hastie, Tibshirani & Friedman, *The Elements of Statistical
+    Learning*, Section 7.10), as each step of the loop applies it: `alt` is kept when its
+    cross-validated torque error is lower beyond one standard error (and by the loop's
+    `min_torque_gain`), or when it lies within one standard error with fewer coefficients (of
+    structures the held-out blocks cannot tell apart, the simpler). The error of a
+    difference is taken pairwise over the held-out blocks ([`within_one_se`][]).
+    """
+    if qualifies(alt.torque_rms, found.torque_rms, options) and not within_one_se(
+        found, alt, blocks
+    ):
+        return BEYOND
+    if n_coef[1] < n_coef[0] and within_one_se(alt, found, blocks):
+        return FEWER.format(alt=n_coef[1], own=n_coef[0])
+    return None
+
+
 def without_kinematic(run: LoopRun, train, found: LoopPath, base_cv: CrossValidation) -> LoopPath:
     """The loop's path from the starting structure without the paper's kinematic columns
-    (eq. (9)), on the same folds, kept instead of `found` when its final model's
-    cross-validated torque error lies beyond one standard error below `found`'s (and its path
-    beats the configured starting model's, `base_cv`, as every path must).
+    (eq. (9)), on the same folds, kept instead of `found` by the one-standard-error rule
+    ([`second_path_reason`][]: lower beyond one standard error, or within it with fewer
+    coefficients; and its path beats the configured starting model's, `base_cv`, as every
+    path must).
 
     The paper's columns are functions of $\\theta\\omega$: on a slow sweep nearly linear in
     the speed, they absorb an encoder skew or a speed-dependent friction or memory state in a
     form that does not carry over to other speeds and angles, and the effects the loop then
     adds compete with them. Which structure holds is a question of model choice between two
     whole paths (a greedy step cannot reach it: removing the columns before an effect is
-    added raises the error), decided by the same cross-validation as every step, and a tie
-    keeps the configured structure.
+    added raises the error), decided by the same cross-validation and the same
+    one-standard-error rule as every step: a tie keeps the structure with fewer
+    coefficients.
 
     The other path is followed only when the configured one added an effect of a family the
     columns compete with (`MOTION_FAMILIES`), and the columns span a share of that effect's
@@ -134,11 +172,12 @@ def without_kinematic(run: LoopRun, train, found: LoopPath, base_cv: CrossValida
         return found._replace(notes=[*found.notes, why])
     quiet = run._replace(options=alt_options, say=lambda _: None)
     alt = add_effects(quiet, model, est_train, cv, reference=base_cv)
-    if not alt.steps or not qualifies(alt.cv.torque_rms, found.cv.torque_rms, options):
+    why = alt.steps and second_path_reason(
+        found.cv, alt.cv, (found.model.n_coef, alt.model.n_coef), run.plan.blocks_rec, options
+    )
+    if not why:
         return found
-    if within_one_se(found.cv, alt.cv, run.plan.blocks_rec):
-        return found
-    change = KINEMATIC_FREE.format(alt=alt.cv.torque_rms, own=found.cv.torque_rms)
+    change = KINEMATIC_FREE.format(alt=alt.cv.torque_rms, own=found.cv.torque_rms, why=why)
     run.say(change)
     with run.phase("test"):
         metrics = test_errors(model, run.test_data, run.joint.rated_torque)[0]

@@ -146,6 +146,9 @@ class AbstractTerm(eqx.Module):
     them as traced values (one compiled program then serves every value), so the columns must
     compute with a traced value wherever they read one (no Python `if` or `float()` on it; select
     with `jnp.where`): a term whose columns branch on such a value in Python names it here."""
+    static_while_zero: ClassVar[tuple[str, ...]] = ()
+    """Float hyperparameters kept as constants of the column programs while they are 0 (and
+    traced otherwise): the columns may skip, in Python, the work such a value switches on."""
     c_code: ClassVar[Callable | None] = None
 
     def __check_init__(self):
@@ -174,6 +177,13 @@ class AbstractTerm(eqx.Module):
     @abc.abstractmethod
     def numpy_columns(self, sig: Signals, torque: SamplesLike | None = None) -> NumpyDesign:
         """The columns computed in NumPy (the reference for `columns`)."""
+
+    def beside(self, terms: tuple[AbstractTerm, ...]) -> AbstractTerm:
+        """This term as it reads in a model whose effect terms are `terms` (itself among
+        them): a term whose columns depend on another term's parameters takes them here
+        (the hysteresis of the measured twist takes the encoders' time skew, see
+        [`hdjax.effects.TwistHysteresis`][]). Itself by default."""
+        return self
 
     def extrapolating_arguments(self, sig: Signals) -> tuple[Float[np.ndarray, " n"], ...]:
         """The signals (NumPy, one value per sample) in which a fit of this term, as a base
@@ -645,3 +655,10 @@ class AbstractTorqueScaleFamily(AbstractFamily):
         option = self.fractions_option
         fractions = self.fractions if option is None else ctx.option(self, option)
         return [Candidate.of(term(**{self.scale_field: f * ctx.rated_torque})) for f in fractions]
+
+
+def coupled(terms: Sequence[AbstractTerm]) -> tuple[AbstractTerm, ...]:
+    """`terms` (a model's effect terms), each as it reads beside the others
+    ([`AbstractTerm.beside`][])."""
+    terms = tuple(terms)
+    return tuple(t.beside(terms) for t in terms)

@@ -62,9 +62,25 @@ class DahlCarry:
 
     def __init__(self) -> None:
         self.state: dict = {}
+        self.history: dict = {}
+
+    def _driver(self, key, term, sig: Signals, torque, rows: int) -> np.ndarray:
+        # a driver that reads samples before its own (`lookback`, the hysteresis aligned at
+        # an encoder skew) reads them from the previous chunk's last own rows, as on the
+        # whole record; at the record's start there are none
+        back = getattr(term, "lookback", 0)
+        if not back:
+            return np.asarray(term.dahl_driver(sig, torque), np.float64)
+        past = self.history.get(key)
+        self.history[key] = jax.tree_util.tree_map(lambda x: x[max(0, rows - back) : rows], sig)
+        if past is None:
+            return np.asarray(term.dahl_driver(sig, torque), np.float64)
+        h = past.n_samples
+        joined = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), past, sig)
+        return np.asarray(term.dahl_driver(joined, None), np.float64)[h:]
 
     def column(self, key, term, sig: Signals, torque, rows: int, numpy: bool) -> np.ndarray:
-        driver = np.asarray(term.dahl_driver(sig, torque), np.float64)
+        driver = self._driver(key, term, sig, torque, rows)
         reset = sig.extras.get(SEGMENT_START)
         reset = np.zeros(driver.shape, bool) if reset is None else np.asarray(reset) != 0
         z0, prev = self.state.get(key, (0.0, None))

@@ -17,6 +17,7 @@ mechanical vibrations", AIAA Journal 14(12), 1976.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import ClassVar
 
@@ -44,6 +45,7 @@ from ._base import (
     AbstractFamily,
     AbstractHysteresis,
     AbstractPathTerm,
+    AbstractTerm,
     AbstractTorqueFreeTerm,
     Candidate,
     CandidateContext,
@@ -52,6 +54,7 @@ from ._base import (
 )
 from ._c import AbstractCEmitter, CSnippet
 from ._fields import bound, concrete, fmt, hyper, labels
+from ._skew import BACK_SAMPLES, EncoderSkew, skew_column
 from ._traced import opaque_hypers
 
 
@@ -406,16 +409,31 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
     driver's noise measured on TRAIN ([`twist_play`][]) on a one-way sweep from rest, and to
     0 (no play) on a record with reversals or where no white noise can be told from the motion
     ([`driver_noise`][]).
+
+    **Beside an encoder time skew.** The state follows the flexspline's deflection, the twist of
+    the two encoders read at one instant. In a model that also holds
+    [`hdjax.effects.EncoderSkew`][] with delay $\\delta$, the recorded twist carries
+    $\\delta\\,c_\\delta$ besides (about $\\delta\\,\\omega_l$: a step of tens of N·m of torque
+    path each time the joint starts or stops, where the deflection has none), so the driver is
+    the twist less that column (the skew term's own, computed the same way). The model
+    sets `skew`, `ratio` and `sign` from its skew term ([`beside`][]); 0 (no skew) reads the
+    recorded twist.
     """
 
     torque_scale: float = hyper(1.0, positive=True)
     compliance: float = hyper(1.0, positive=True)
     initial: float = hyper(0.0)
     play: float = hyper(0.0)
+    skew: float = hyper(0.0)
+    ratio: float = hyper(1.0, positive=True)
+    sign: float = hyper(1.0)
 
     static_hypers: ClassVar[tuple[str, ...]] = ("initial", "play")
     """The initial state and the play are constants of the column programs: they branch on
     each being 0."""
+
+    static_while_zero: ClassVar[tuple[str, ...]] = ("skew",)
+    """Without a skew the driver is the recorded twist itself (no interpolation to run)."""
 
     @property
     def key(self) -> str:
@@ -424,7 +442,11 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
 
     def names(self) -> tuple[str, ...]:
         """The state's column (with its initial state when not 0)."""
-        arg = f"twist/{fmt(self.compliance)}/{fmt(self.torque_scale)}"
+        skew = concrete(self.skew)  # None inside a compiled program (a traced value)
+        twist = "twist@skew" if skew is None else "twist"
+        if skew is not None and skew:
+            twist = f"twist@{fmt(round(float(skew) * 1e3, 6))}ms"
+        arg = f"{twist}/{fmt(self.compliance)}/{fmt(self.torque_scale)}"
         if self.play:
             arg += f" ± {fmt(self.play)}"
         return (f"dahl({arg}; from {fmt(self.initial)})" if self.initial else f"dahl({arg})",)
@@ -447,14 +469,35 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
     """The column at sample $k$ is the state after sample $k-1$ (see the class docstring)."""
 
     def dahl_driver(self, sig: Signals, torque: SamplesLike | None = None) -> Samples:
-        """The path the Dahl state follows: the measured twist over the compliance."""
-        return sig.twist / self.compliance
+        """The path the Dahl state follows: the measured twist over the compliance, the twist
+        aligned at the model's encoder skew when it has one (class docstring)."""
+        if isinstance(self.skew, (int, float)) and self.skew == 0.0:
+            return sig.twist / self.compliance
+        xp = np if isinstance(sig.twist, np.ndarray) else jnp
+        aligned = sig.twist - self.skew * skew_column(sig, self.skew, self.ratio, self.sign, xp)
+        return aligned / self.compliance
+
+    @property
+    def lookback(self) -> int:
+        """Samples before a chunk that its driver reads: those of the skew's interpolation."""
+        return 0 if not self.skew else BACK_SAMPLES + 1
+
+    def beside(self, terms: tuple[AbstractTerm, ...]) -> TwistHysteresis:
+        """The term aligned at the delay of the encoder skew among `terms` (none: 0)."""
+        skews = [t for t in terms if isinstance(t, EncoderSkew)]
+        s = skews[0] if skews else None
+        want = (s.delay, s.ratio, s.sign) if s is not None else (0.0, 1.0, 1.0)
+        if (self.skew, self.ratio, self.sign) == want:
+            return self
+        return dataclasses.replace(self, skew=want[0], ratio=want[1], sign=want[2])
 
     def c_code(self, c: AbstractCEmitter) -> CSnippet:
         """The Dahl state of the measured twist for the exported estimator: one step of
         [`dahl_state`][] per sample, from 0 and without a step at the first sample, of the
         driver after its [`play`][hdjax.effects.play] when `play` > 0; the column is the
-        state before this sample's step (one sample late, as the JAX column). A state that
+        state before this sample's step (one sample late, as the JAX column); beside an
+        encoder skew, the twist less the skew's column, computed as that term's own C code
+        does ([`hdjax.effects.EncoderSkew.c_code`][]). A state that
         starts at `initial` $\ne 0$ takes its sign from the first motion, which a
         per-sample step has not seen yet: refused."""
         if self.initial:
@@ -468,15 +511,20 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
         z, prev, out = c.state("z"), c.state("prev"), c.state("out")
         d, du = c.local("d"), c.local("du")
         one = c.num(1.0)
-        driver = (f"const {c.real} {d} = {c.signal('twist')} / {c.num(self.compliance)};",)
+        twist, aligned = c.signal("twist"), CSnippet()
+        if self.skew:  # the twist less the skew's column (its interpolation, its state)
+            aligned = EncoderSkew(delay=self.skew, ratio=self.ratio, sign=self.sign).c_code(c)
+            twist = f"({twist} - {c.num(self.skew)} * {aligned.columns[0]})"
+        driver = (f"const {c.real} {d} = {twist} / {c.num(self.compliance)};",)
         if self.play:  # the play: the driver held within its band (as `play`)
             raw, h = c.local("raw"), c.num(self.play)
             driver = (
-                f"const {c.real} {raw} = {c.signal('twist')} / {c.num(self.compliance)};",
+                f"const {c.real} {raw} = {twist} / {c.num(self.compliance)};",
                 f"const {c.real} {d} = {c.first} ? {raw} : "
                 f"hdjax_clip({prev}, {raw} - {h}, {raw} + {h});",
             )
         update = (
+            *aligned.update,
             *driver,
             f"if ({c.first}) {prev} = {d};",
             f"{out} = {z};",
@@ -485,7 +533,13 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
             f"{prev} = {d};",
         )
         state = (("z", 0.0), ("prev", 0.0), ("out", 0.0))
-        return CSnippet(columns=(out,), state=state, update=update)
+        return CSnippet(
+            columns=(out,),
+            state=state,
+            update=update,
+            double_state=aligned.double_state,
+            helpers=aligned.helpers,
+        )
 
     # the Dahl state of `dahl_driver` (shared by both hysteresis terms)
     columns = _dahl_column

@@ -108,6 +108,20 @@ def delayed(t, x, delay: Scalar, xp: ModuleType = np, reset=None):
     return xp.where(done, out, hi_x)
 
 
+def skew_column(sig: Signals, delay, ratio, sign, xp: ModuleType = np):
+    """The column $c_\\delta$ of a delay `delay` $\\delta$ [s] (nonzero) between the load and
+    the motor encoder (module docstring): $s\\,(x(t) - x(t - |\\delta|))/|\\delta|$, the
+    encoder read earlier ($x = \\theta_l$ for $\\delta > 0$, $\\theta_m/N$ for
+    $\\delta < 0$) interpolated back by [`delayed`][]. The recorded twist less
+    $\\delta\\,c_\\delta$ is the twist of the two encoders read at one instant (Song et al.
+    eq. (5)). Written for values that are traced too (a compiled column program serves every
+    delay, see `split_hypers`): both encoders' angles, the later one selected."""
+    d = xp.abs(delay)
+    t = xp.asarray(sig.t)
+    x = xp.where(delay > 0, xp.asarray(sig.theta_l), xp.asarray(sig.theta_m) / ratio)
+    return sign * (x - delayed(t, x, d, xp, sig.extras.get(SEGMENT_START))) / d
+
+
 class EncoderSkew(AbstractTorqueFreeTerm):
     r"""A time skew `delay` $\delta$ [s] between the load and motor encoders (positive: the load
     encoder is read after the motor encoder) as the exact twist it adds, one column
@@ -138,14 +152,8 @@ class EncoderSkew(AbstractTorqueFreeTerm):
             raise ConfigError(f"EncoderSkew: delay must be finite and nonzero, got {self.delay!r}")
 
     def _column(self, sig: Signals, xp: ModuleType):
-        # written for a delay that is a traced value too (a compiled column program serves
-        # every delay, see `split_hypers`): both encoders' angles, the later one selected;
         # constants made opaque round as traced values do
-        delay, ratio, sign = opaque_in(xp, self.delay, self.ratio, self.sign)
-        d = xp.abs(delay)
-        t = xp.asarray(sig.t)
-        x = xp.where(delay > 0, xp.asarray(sig.theta_l), xp.asarray(sig.theta_m) / ratio)
-        return sign * (x - delayed(t, x, d, xp, sig.extras.get(SEGMENT_START))) / d
+        return skew_column(sig, *opaque_in(xp, self.delay, self.ratio, self.sign), xp)
 
     def columns(self, sig: Signals, torque: SamplesLike | None = None) -> Float[Array, "n 1"]:
         return self._column(sig, jnp)[:, None]

@@ -125,11 +125,14 @@ def split_hypers(term) -> tuple[object, dict[str, np.ndarray]]:
     if type(term) in _NEEDS_CONSTANTS:
         return term, {}
     keep = getattr(type(term), "static_hypers", ())
+    keep_zero = getattr(type(term), "static_while_zero", ())
     values, signs = {}, {}
     for f in dataclasses.fields(term):
         if "positive" not in f.metadata or f.name in keep:  # hyper() fields only
             continue
         v = getattr(term, f.name)
+        if f.name in keep_zero and isinstance(v, (int, float)) and v == 0.0:
+            continue
         if is_finite_number(v) and isinstance(v, float):
             values[f.name], signs[f.name] = np.asarray(v, np.float64), _sign(v)
         elif _is_float_tuple(v):

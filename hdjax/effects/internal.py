@@ -4,7 +4,7 @@ the helpers of the plant's effects, and terms split for compiled programs.
 Not part of the documented API: these names may change with the packages that use them.
 """
 
-from ._base import check_slot as check_slot
+from ._base import check_slot as check_slot, coupled as coupled
 from ._dahl_carry import (
     DahlCarry as DahlCarry,
     is_sequential as is_sequential,
