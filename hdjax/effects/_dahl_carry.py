@@ -69,11 +69,10 @@ class DahlCarry:
         # an encoder skew) reads them from the previous chunk's last own rows, as on the
         # whole record; at the record's start there are none
         back = getattr(term, "lookback", 0)
-        if not back:
-            return np.asarray(term.dahl_driver(sig, torque), np.float64)
         past = self.history.get(key)
-        self.history[key] = jax.tree_util.tree_map(lambda x: x[max(0, rows - back) : rows], sig)
-        if past is None:
+        if back:
+            self.history[key] = jax.tree_util.tree_map(lambda x: x[max(0, rows - back) : rows], sig)
+        if not back or past is None:
             return np.asarray(term.dahl_driver(sig, torque), np.float64)
         h = past.n_samples
         joined = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), past, sig)

@@ -34,6 +34,11 @@ def is_finite_number(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
+def is_zero(x) -> bool:
+    """Whether `x` is a plain Python 0 (never true for a traced value, whose value is unknown)."""
+    return is_finite_number(x) and x == 0
+
+
 def check_positive(owner: str, field: str, value) -> None:
     """Raise `ConfigError` when a plain-number hyperparameter is not finite and positive."""
     if isinstance(value, (int, float)) and not (math.isfinite(value) and value > 0):

@@ -53,7 +53,7 @@ from ._base import (
     late,
 )
 from ._c import AbstractCEmitter, CSnippet
-from ._fields import bound, concrete, fmt, hyper, labels
+from ._fields import bound, concrete, fmt, hyper, is_zero, labels
 from ._skew import BACK_SAMPLES, EncoderSkew, skew_column
 from ._traced import opaque_hypers
 
@@ -471,7 +471,7 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
     def dahl_driver(self, sig: Signals, torque: SamplesLike | None = None) -> Samples:
         """The path the Dahl state follows: the measured twist over the compliance, the twist
         aligned at the model's encoder skew when it has one (class docstring)."""
-        if isinstance(self.skew, (int, float)) and self.skew == 0.0:
+        if is_zero(self.skew):
             return sig.twist / self.compliance
         xp = np if isinstance(sig.twist, np.ndarray) else jnp
         aligned = sig.twist - self.skew * skew_column(sig, self.skew, self.ratio, self.sign, xp)
@@ -480,12 +480,11 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
     @property
     def lookback(self) -> int:
         """Samples before a chunk that its driver reads: those of the skew's interpolation."""
-        return 0 if not self.skew else BACK_SAMPLES + 1
+        return 0 if is_zero(self.skew) else BACK_SAMPLES + 1
 
     def beside(self, terms: tuple[AbstractTerm, ...]) -> TwistHysteresis:
         """The term aligned at the delay of the encoder skew among `terms` (none: 0)."""
-        skews = [t for t in terms if isinstance(t, EncoderSkew)]
-        s = skews[0] if skews else None
+        s = next((t for t in terms if isinstance(t, EncoderSkew)), None)
         want = (s.delay, s.ratio, s.sign) if s is not None else (0.0, 1.0, 1.0)
         if (self.skew, self.ratio, self.sign) == want:
             return self

@@ -38,7 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import Scalar
-from ._fields import is_finite_number
+from ._fields import is_finite_number, is_zero
 
 
 def opaque(x: Scalar) -> jax.Array:
@@ -131,7 +131,7 @@ def split_hypers(term) -> tuple[object, dict[str, np.ndarray]]:
         if "positive" not in f.metadata or f.name in keep:  # hyper() fields only
             continue
         v = getattr(term, f.name)
-        if f.name in keep_zero and isinstance(v, (int, float)) and v == 0.0:
+        if f.name in keep_zero and is_zero(v):
             continue
         if is_finite_number(v) and isinstance(v, float):
             values[f.name], signs[f.name] = np.asarray(v, np.float64), _sign(v)
