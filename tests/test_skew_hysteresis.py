@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import hdjax
+from hdjax import ConfigError
 from hdjax.compliance import ComplianceModel
 from hdjax.discover import pipeline_signals
 from hdjax.effects import EncoderSkew, TwistHysteresis
@@ -86,3 +87,10 @@ def test_the_aligned_state_is_the_same_whole_in_numpy_in_jax_and_chunk_by_chunk(
         part = jax.tree_util.tree_map(lambda x: x[lo:hi], sig)
         parts.append(carry.column(0, term, part, None, hi - lo, numpy=True))
     np.testing.assert_allclose(np.concatenate(parts), whole, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("field", ["skew", "sign"])
+def test_a_non_finite_alignment_is_refused_with_what_it_is(field):
+    # a NaN delay would make every state NaN without a word: refused at construction
+    with pytest.raises(ConfigError, match=f"TwistHysteresis: {field} .* must be finite, got nan"):
+        TwistHysteresis(torque_scale=40.0, compliance=K, **{field: float("nan")})

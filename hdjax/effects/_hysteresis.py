@@ -464,6 +464,14 @@ class TwistHysteresis(AbstractTorqueFreeTerm):
                 f"TwistHysteresis: play (the half-width of the dead band on the state's "
                 f"driver, N·m of torque path) must be finite and >= 0, got {self.play!r}"
             )
+        for name in ("skew", "sign"):
+            v = getattr(self, name)
+            if isinstance(v, (int, float)) and not math.isfinite(v):
+                raise ConfigError(
+                    f"TwistHysteresis: {name} (set from the model's encoder skew term) must be "
+                    f"finite, got {v!r}; leave it out, and add an EncoderSkew to the model "
+                    "to align the state at a delay"
+                )
 
     lag: ClassVar[bool] = True
     """The column at sample $k$ is the state after sample $k-1$ (see the class docstring)."""
