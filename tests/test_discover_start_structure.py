@@ -205,3 +205,94 @@ def test_the_share_tells_a_slow_sweep_from_a_to_and_fro_motion():
     rec = to_and_fro(1, [("coulomb_l", 8 / 206264.8, 0.05)], n=50_000)
     friction = Coulomb(signal="omega_l", omega_s=0.05)
     assert share(TF_JOINT, rec, friction) < 0.1 * _second_start.KINEMATIC_SHARE
+
+
+def test_the_second_path_also_carries_the_motion_effects_the_first_found(monkeypatch):
+    # beside a hysteresis, an encoder skew is what the kinematic columns took up: without the
+    # columns neither effect alone lowers the error, so a greedy path from that start adds
+    # nothing (draw 4 of the two-speed skew cases in benchmarks/real_log_cases.py). Then the
+    # second start is followed again with the first path's motion effects added first, terms
+    # as found, and judged by the one-standard-error rule against the first path
+    blocks = np.repeat(np.arange(10), 50)
+    base = 1.0 + 0.5 * np.sin(np.arange(500) / 7.0) ** 2
+    found_cv = CrossValidation(float(np.sqrt(base.mean())), 1.0, [], [], squared_errors=base)
+    as_found = Coulomb(signal="omega_l", omega_s=0.05)  # a motion effect, with its settings
+    hyst = SimpleNamespace(key="hysteresis:torque", family="hysteresis", term=as_found)
+    harm = SimpleNamespace(key="harmonic:theta_l:4", family="harmonic", term=Viscous())
+    model = lambda n: SimpleNamespace(n_coef=n)
+    found = _path.LoopPath([hyst, harm], model(29), None, found_cv, {}, None, [], [], [])
+    lower = [-10.0 + 0.1 * (-1) ** b for b in range(10)]  # beyond one standard error
+    paths: list = []
+    calls: list = []
+
+    def add_effects(run, model, est, cv, reference=None, carried=()):
+        calls.append(carried)
+        return paths[len(calls) - 1]
+
+    monkeypatch.setattr(_second_start, "kinematic_share", lambda *a: 1.0)
+    monkeypatch.setattr(_second_start, "calibrate_baseline", lambda *a: model(16))
+    monkeypatch.setattr(_second_start, "estimate", lambda *a: None)
+    monkeypatch.setattr(_second_start, "cross_validate", lambda *a, **k: found_cv)
+    monkeypatch.setattr(_second_start, "add_effects", add_effects)
+    monkeypatch.setattr(_second_start, "say_step", lambda *a: None)
+    errors = SimpleNamespace(rms=1.0, max=2.0)
+    monkeypatch.setattr(_second_start, "test_errors", lambda *a: (errors, None))
+    run = _path.LoopRun(*[None] * len(_path.LoopRun._fields))
+    run = run._replace(
+        options=DiscoverOptions(),
+        phase=_path.Phases(),
+        say=lambda _: None,
+        plan=SimpleNamespace(folds_rec=None, scored=None, blocks_rec=blocks),
+        joint=SimpleNamespace(rated_torque=1.0),
+    )
+    path = lambda steps, n, per_block: _path.LoopPath(
+        steps, model(n), None, _cv(per_block, base, blocks), {}, None, [], [], []
+    )
+    # the greedy path adds nothing; the carried one is lower beyond one standard error
+    paths[:] = [path([], 16, [0.0] * 10), path([hyst, hyst], 18, lower)]
+    out = _second_start.without_kinematic(run, None, found, found_cv)
+    assert calls[0] == () and len(calls) == 2
+    (carry,) = calls[1]  # the motion effect only, with the term the first path found
+    assert (carry.key, carry.family, carry.origin) == ("hysteresis:torque", "hysteresis", "carried")
+    assert carry.term is as_found
+    assert out is not found and out.cv is paths[1].cv
+    assert "starts by adding hysteresis:torque" in out.start_structure["note"]
+    # the greedy path can start: nothing is carried over, and that path is judged alone
+    calls.clear()
+    paths[:] = [path([hyst], 17, lower), path([hyst, hyst], 18, lower)]
+    out = _second_start.without_kinematic(run, None, found, found_cv)
+    assert calls == [()] and out.cv is paths[0].cv
+    assert "starts by adding" not in out.start_structure["note"]
+    # the carried path is worse beyond one standard error: the first path stands
+    calls.clear()
+    worse = [3.0 + 0.1 * (-1) ** b for b in range(10)]
+    paths[:] = [path([], 16, [0.0] * 10), path([hyst], 17, worse)]
+    assert _second_start.without_kinematic(run, None, found, found_cv) is found
+    assert len(calls) == 2
+
+
+def test_a_carried_effect_is_added_as_it_is_or_said_why_not():
+    # the trial of a carried candidate uses its own term, whatever its gain, with its key's
+    # scores on this path's library; a key the library lacks, or a term that does not
+    # calibrate, ends with a note instead of a step
+    from hdjax.discover._decision import Trial
+    from hdjax.effects import Candidate
+
+    found = Coulomb(signal="omega_l", omega_s=0.05)
+    carry = Candidate("coulomb:omega_l", "coulomb", found, "carried")
+    other = Candidate("coulomb:omega_l", "coulomb", Coulomb(signal="omega_l", omega_s=0.2))
+    folds = np.array([-0.3, 0.1])
+    ranked = [SimpleNamespace(candidate=other, gain=-0.3, fold_gains=folds, stability=0.2)]
+    cv = CrossValidation(1.0, 1.0, [], [])
+    try_one = lambda cand, gain, folds, stab: Trial(cand, gain, folds, stab, None, None, cv)
+    notes: list[str] = []
+    trial = _path._carried_trial(carry, ranked, try_one, notes)
+    assert trial == Trial(carry, -0.3, folds, 0.2, None, None, cv) and not notes
+    assert _path._carried_trial(carry, [], try_one, notes) is None
+    assert "does not offer it" in notes[-1]
+
+    def fails(*a):
+        raise CalibrationError("not invertible")
+
+    assert _path._carried_trial(carry, ranked, fails, notes) is None
+    assert "could not be added: not invertible" in notes[-1]

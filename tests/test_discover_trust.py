@@ -122,8 +122,13 @@ def test_hysteresis_reaches_the_true_structure(name):
     print(name, res.aux.effects, res.aux.baseline.rms, res.aux.final.rms, true.rms)
     assert "hysteresis:torque" in res.aux.effects
     assert res.aux.final.rms <= 1.5 * true.rms, (res.aux.final.rms, true.rms)
+    # every step the loop chose lowers the CV error; an effect carried over into a path from
+    # the structure without the kinematic columns is not chosen (that path is judged whole)
     cv = [res.aux.baseline_cv_torque_rms] + [s.cv_torque_rms for s in res.aux.steps]
-    assert all(b < a for a, b in zip(cv, cv[1:])), "an accepted step never raises the CV error"
+    if res.aux.start_structure:
+        cv[0] = res.aux.start_structure["cv_torque_rms"]
+    chosen = [b < a for a, b, s in zip(cv, cv[1:], res.aux.steps) if not s.carried]
+    assert all(chosen), "an accepted step never raises the CV error"
 
 
 def _coverage(kind, n=60):

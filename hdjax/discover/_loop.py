@@ -37,10 +37,13 @@
 7. **A second starting structure.** When the starting model holds the paper's kinematic
    columns (eq. (9), functions of angle times speed) and the path added an effect whose
    columns depend on the speed or direction of motion and which those columns partly span on
-   TRAIN, steps 3-6 run again from the structure without them, on the same folds; that path is
-   kept by the one-standard-error rule: when its final cross-validated torque error lies
-   beyond one standard error below the first's, or within one standard error with fewer
-   coefficients ([`hdjax.discover._second_start.second_path_reason`][]).
+   TRAIN, steps 3-6 run again from the structure without them, on the same folds (when no
+   single effect lowers the error there, once more adding first the first path's motion
+   effects as found: effects that need each other, a hysteresis beside a skew, cannot be
+   added one at a time). That path is kept by the one-standard-error rule: when its final
+   cross-validated torque error lies beyond one standard error below the first's, or within
+   one standard error with fewer coefficients
+   ([`hdjax.discover._second_start.second_path_reason`][]).
 8. Refit on all of TRAIN, estimate torque on TEST and record the errors. TEST is never used
    to choose. At the end every added effect's amplitude gets a 95 % moving-block bootstrap
    interval over TRAIN ([`hdjax.discover._uncertainty`][]), and structure the final model

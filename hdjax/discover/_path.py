@@ -4,6 +4,7 @@ that takes every step back unless the path beats the starting model."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -129,13 +130,42 @@ class LoopPath(NamedTuple):
     start_structure: dict = {}
 
 
-def add_effects(run: LoopRun, model, est_train, cv, reference: CrossValidation | None = None):
+def _carried_trial(carry, ranked, try_one, notes) -> Trial | None:
+    """The trial of the candidate `carry`, as it is (its term with its own settings), whatever
+    its gain: an effect carried into a path, not chosen by the stopping rule; scored with its
+    key's gain and stability on this path's library. `None` (with a note) when the library
+    offers no such key or the term does not calibrate."""
+    for r in (r for r in ranked if r.candidate.key == carry.key):
+        try:
+            return try_one(carry, r.gain, r.fold_gains, r.stability)
+        except (CalibrationError, InversionError) as err:
+            notes.append(f"carried effect {carry.key} could not be added: {err}")
+            return None
+    notes.append(f"carried effect {carry.key} not added: this path's library does not offer it")
+    return None
+
+
+def add_effects(
+    run: LoopRun,
+    model,
+    est_train,
+    cv,
+    reference: CrossValidation | None = None,
+    carried: tuple = (),
+):
     """The loop proper: score the library, shortlist, try, choose and add one effect per
     step until the stopping rule ([`hdjax.discover._decision.choose`][]) or `max_effects`
     stops it; then every step is taken back unless the path as a whole beats the starting
     model beyond one standard error ([`hdjax.discover._decision.beats_start`][]), or
     `reference`, when given (the configured starting model's cross-validation, for a path
     from another starting structure).
+
+    The candidates in `carried` are added first, in order, with their terms as they are and
+    whatever their gain (scored as any step is, and marked `carried`): the effects a path
+    from another structure takes over from the configured one. They are not chosen by the
+    stopping rule, so only the path as a whole is judged, by the gate above and by the rule
+    that compares it with the configured path. A carried effect that cannot be added ends the
+    carrying (with a note); the loop then goes on by its rule.
 
     **Returns:** a `LoopPath`: the steps, and the model, TRAIN estimate, cross-validation,
     spectra, residual and ranking after the last step; its notes are its own (`run.notes`
@@ -169,6 +199,24 @@ def add_effects(run: LoopRun, model, est_train, cv, reference: CrossValidation |
 
         def try_one(cand, gain, folds_, stab, phase=run.phase, model=model, est=est_train, cv=cv):
             return _trial(run, model, cand, gain, folds_, stab, est, cv, phase)
+
+        if len(steps) < len(carried):
+            best = _carried_trial(carried[len(steps)], ranked, try_one, notes)
+            if best is not None:
+                step = _step(run, best, model, est_train, ranked, ranking, spectra)
+                steps.append(dataclasses.replace(step, carried=True))
+                notes.append(
+                    f"step {len(steps)}: {best.key} carried over from the path with the "
+                    "configured structure, its term as found there, whatever its own gain "
+                    f"(cross-validated torque RMS {cv.torque_rms:.4g} -> {best.cv_rms:.4g} N·m; "
+                    "the path is judged whole; the twist gain and stability shown are its "
+                    "key's best candidate's on this path)"
+                )
+                model, est_train, cv = best.model, best.estimate, best.cv
+                path.append(cv)
+                say_step(steps, run.base_metrics, run.say, notes)
+                continue
+            carried = ()
 
         by_key: dict = {}  # this step's trials by key (None: could not be calibrated)
 

@@ -36,6 +36,9 @@ class DiscoveryStep:
     aliases: list[dict] = dataclasses.field(default_factory=list)
     """Candidates TRAIN cannot tell apart from this one: `{"key", "cosine"}`, the smallest
     principal-angle cosine between the centred column spans (at least 0.99)."""
+    carried: bool = False
+    """Added first on a path from another starting structure, as the configured path found
+    it, whatever its own gain (not chosen by the stopping rule: the path is judged whole)."""
 
 
 @dataclasses.dataclass

@@ -56,6 +56,7 @@ def report_dict(solution: Solution, *, extra: dict | None = None) -> dict:
                 "term": s.term.names(),
                 "ranking": s.ranking,
                 "aliases": s.aliases,
+                **({"carried": True} if s.carried else {}),
             }
             for s in result.steps
         ],
@@ -232,8 +233,9 @@ def report_markdown(d: dict, figures: list[tuple[str, str]], use: str | None = N
             if a
             else ""
         )
+        carried = " (carried over)" if s.get("carried") else ""
         lines.append(
-            f"| {i} | `{s['effect']}` | {s['rms']:.4g} | {s['max']:.4g} | "
+            f"| {i} | `{s['effect']}`{carried} | {s['rms']:.4g} | {s['max']:.4g} | "
             f"{s['cv_torque_rms']:.4g} | {s['cv_twist_rms_arcsec']:.4g} |"
         )
         details.append(f"| {i} | {s['cv_gain']:.1%} | {s['stability']:.0%} | {amp} |")

@@ -9,7 +9,7 @@ import numpy as np
 
 from .._custom_types import Int
 from .._errors import CalibrationError, InversionError
-from ..effects import PaperFourier
+from ..effects import Candidate, PaperFourier
 from ._aliases import _model_rows, _strided, first_canonical_r2
 from ._decision import qualifies
 from ._evaluate import test_errors
@@ -39,6 +39,13 @@ KINEMATIC_FREE = (
     'model written holds the structure found ([model] kinematic = "none" for hdjax run)'
 )
 
+
+CARRIED = (
+    "; that path starts by adding {keys}, the effects the path with the columns found that "
+    "they compete with, whatever each one's own gain (only the path as a whole is judged), "
+    "because from that start no single effect lowers the error: an effect such as a "
+    "hysteresis can explain little without the columns until an encoder skew joins it"
+)
 
 BEYOND = "lower beyond one standard error, paired over the held-out blocks"
 FEWER = (
@@ -131,6 +138,17 @@ def without_kinematic(run: LoopRun, train, found: LoopPath, base_cv: CrossValida
     one-standard-error rule as every step: a tie keeps the structure with fewer
     coefficients.
 
+    From that structure the loop's own path is followed, one step at a time. Effects can need
+    each other there: beside a hysteresis, the skew the columns took up is back in the
+    residual, and neither alone lowers the error, so that path adds nothing (draw 4 of the
+    two-speed skew cases of `benchmarks/real_log_cases.py`). When it adds nothing, the path is
+    followed again adding first the motion effects `found` holds, their terms as found (a
+    hysteresis keeps its width), whatever each one gains, then going on by the loop's rule.
+    Effects are carried over only where no single one can start: where one can, carrying
+    them as well gave, on a one-way sweep from rest, a lower cross-validated error through
+    harmonics of the output angle that made up for a width chosen beside the columns, and a
+    TEST error 2.6 times as large (one-sweep hysteresis draw 1).
+
     The other path is followed only when the configured one added an effect of a family the
     columns compete with (`MOTION_FAMILIES`), and the columns span a share of that effect's
     columns on TRAIN (at least `KINEMATIC_SHARE`, [`kinematic_share`][]): only then can they
@@ -153,7 +171,7 @@ def without_kinematic(run: LoopRun, train, found: LoopPath, base_cv: CrossValida
     notes: list[str] = []
     run.say(
         "second path: from the starting structure without the paper's kinematic columns "
-        "(kept only if its cross-validated torque error is lower beyond one standard error)"
+        "(kept by the one-standard-error rule)"
     )
     try:
         with run.phase("baseline"):
@@ -171,13 +189,24 @@ def without_kinematic(run: LoopRun, train, found: LoopPath, base_cv: CrossValida
         run.say(why)
         return found._replace(notes=[*found.notes, why])
     quiet = run._replace(options=alt_options, say=lambda _: None)
+    # the found effects as they are (a hysteresis keeps its width: on this start's residual,
+    # where the skew the columns took up is back, the grid would choose another)
+    steps = [s for s, flag in zip(found.steps, motion) if flag]
+    carried = tuple(Candidate(s.key, s.family, s.term, "carried") for s in steps)
+    # effects that need each other there (a hysteresis beside the skew the columns took up)
+    # cannot be added one at a time: when no single one lowers the error, the path starts
+    # again with the first path's motion effects carried over
+    carry: tuple = ()
     alt = add_effects(quiet, model, est_train, cv, reference=base_cv)
-    why = alt.steps and second_path_reason(
-        found.cv, alt.cv, (found.model.n_coef, alt.model.n_coef), run.plan.blocks_rec, options
-    )
+    if not alt.steps:
+        carry = carried
+        alt = add_effects(quiet, model, est_train, cv, reference=base_cv, carried=carry)
+    n_coef = (found.model.n_coef, alt.model.n_coef)
+    why = alt.steps and second_path_reason(found.cv, alt.cv, n_coef, run.plan.blocks_rec, options)
     if not why:
         return found
     change = KINEMATIC_FREE.format(alt=alt.cv.torque_rms, own=found.cv.torque_rms, why=why)
+    change += CARRIED.format(keys=", ".join(c.key for c in carry)) if carry else ""
     run.say(change)
     with run.phase("test"):
         metrics = test_errors(model, run.test_data, run.joint.rated_torque)[0]
