@@ -286,13 +286,14 @@ def test_a_carried_effect_is_added_as_it_is_or_said_why_not():
     cv = CrossValidation(1.0, 1.0, [], [])
     try_one = lambda cand, gain, folds, stab: Trial(cand, gain, folds, stab, None, None, cv)
     notes: list[str] = []
-    trial = _path._carried_trial(carry, ranked, try_one, notes)
-    assert trial == Trial(carry, -0.3, folds, 0.2, None, None, cv) and not notes
-    assert _path._carried_trial(carry, [], try_one, notes) is None
+    trial = _path._carried_trial(carry, ranked, try_one, notes, cv, 1)
+    assert trial == Trial(carry, -0.3, folds, 0.2, None, None, cv)
+    assert notes == [notes[0]] and notes.pop().startswith("step 1: coulomb:omega_l carried over")
+    assert _path._carried_trial(carry, [], try_one, notes, cv, 1) is None
     assert "does not offer it" in notes[-1]
 
     def fails(*a):
         raise CalibrationError("not invertible")
 
-    assert _path._carried_trial(carry, ranked, fails, notes) is None
+    assert _path._carried_trial(carry, ranked, fails, notes, cv, 1) is None
     assert "could not be added: not invertible" in notes[-1]

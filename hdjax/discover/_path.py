@@ -130,19 +130,69 @@ class LoopPath(NamedTuple):
     start_structure: dict = {}
 
 
-def _carried_trial(carry, ranked, try_one, notes) -> Trial | None:
-    """The trial of the candidate `carry`, as it is (its term with its own settings), whatever
-    its gain: an effect carried into a path, not chosen by the stopping rule; scored with its
-    key's gain and stability on this path's library. `None` (with a note) when the library
-    offers no such key or the term does not calibrate."""
+def _carried_trial(carry, ranked, try_one, notes, cv, n: int) -> Trial | None:
+    """The trial of step `n`, the candidate `carry`, as it is (its term with its own
+    settings), whatever its gain: an effect carried into a path, not chosen by the stopping
+    rule (the path is judged whole); scored with its key's gain and stability on this path's
+    library, against `cv`, the cross-validation before it. `None` (with a note) when the
+    library offers no such key or the term does not calibrate."""
     for r in (r for r in ranked if r.candidate.key == carry.key):
         try:
-            return try_one(carry, r.gain, r.fold_gains, r.stability)
+            best = try_one(carry, r.gain, r.fold_gains, r.stability)
         except (CalibrationError, InversionError) as err:
             notes.append(f"carried effect {carry.key} could not be added: {err}")
             return None
+        notes.append(
+            f"step {n}: {best.key} carried over from the path with the configured structure, "
+            "its term as found there, whatever its own gain (cross-validated torque RMS "
+            f"{cv.torque_rms:.4g} -> {best.cv_rms:.4g} N·m; the path is judged whole; the "
+            "twist gain and stability shown are its key's best candidate's on this path)"
+        )
+        return best
     notes.append(f"carried effect {carry.key} not added: this path's library does not offer it")
     return None
+
+
+def _chosen_trial(run: LoopRun, model, est_train, cv, ranked, ranking, try_one, n: int):
+    """Step `n` by the loop's rule: shortlist, try and choose
+    ([`hdjax.discover._decision.choose`][]), with the speed reading; `None` (with a note)
+    when no candidate qualifies."""
+    data, options, notes = run.data, run.options, run.notes
+    by_key: dict = {}  # this step's trials by key (None: could not be calibrated)
+
+    try_key = _key_trier(ranked, ranking, try_one, cv, options, by_key)
+    aliased = alias_test(*training_data(model, data, est_train), take=data.part)
+
+    def try_round(part, trials):
+        # a key try_key has already calibrated is not calibrated again
+        part = [r for r in part if by_key.get(r.candidate.key) is None]
+        if trials:
+            notes.append(
+                f"step {n}: none of "
+                + ", ".join(f"{t.key} ({t.cv_rms:.4g} N·m)" for t in trials)
+                + f" lowers the cross-validated torque error ({cv.torque_rms:.4g} N·m) by "
+                f"{_percent(options.min_torque_gain)}; the next eligible tried: "
+                + ", ".join(r.candidate.key for r in part)
+            )
+        tried = _shortlist_trials(part, ranking, try_one, notes, options)
+        by_key.update({t.key: t for t in tried})
+        taken = frozenset(t.key for t in trials) | {r.candidate.key for r in part}
+        return trials + read_speed_trials(tried, data, try_key, taken)
+
+    shortlist, trials = shortlist_rounds(
+        eligible(ranked, options, aliased), options, cv.torque_rms, try_round
+    )
+
+    determined = determination(model, data, est_train)
+    best = choose(
+        trials, cv, run.plan.blocks_rec, options, notes, lambda t: determined(t.candidate.term)
+    )
+    if best is None:
+        notes.append(no_step_note(trials, shortlist, cv, options))
+        return None
+    # the reading's trial must pass the test the chosen trial passed
+    passing = [t for t in trials if qualifies(t.cv_rms, cv.torque_rms, options)]
+    return speed_reading(best, passing, data, notes, try_key)
 
 
 def add_effects(
@@ -200,62 +250,16 @@ def add_effects(
         def try_one(cand, gain, folds_, stab, phase=run.phase, model=model, est=est_train, cv=cv):
             return _trial(run, model, cand, gain, folds_, stab, est, cv, phase)
 
+        n, best = len(steps) + 1, None
         if len(steps) < len(carried):
-            best = _carried_trial(carried[len(steps)], ranked, try_one, notes)
-            if best is not None:
-                step = _step(run, best, model, est_train, ranked, ranking, spectra)
-                steps.append(dataclasses.replace(step, carried=True))
-                notes.append(
-                    f"step {len(steps)}: {best.key} carried over from the path with the "
-                    "configured structure, its term as found there, whatever its own gain "
-                    f"(cross-validated torque RMS {cv.torque_rms:.4g} -> {best.cv_rms:.4g} N·m; "
-                    "the path is judged whole; the twist gain and stability shown are its "
-                    "key's best candidate's on this path)"
-                )
-                model, est_train, cv = best.model, best.estimate, best.cv
-                path.append(cv)
-                say_step(steps, run.base_metrics, run.say, notes)
-                continue
-            carried = ()
-
-        by_key: dict = {}  # this step's trials by key (None: could not be calibrated)
-
-        try_key = _key_trier(ranked, ranking, try_one, cv, options, by_key)
-        aliased = alias_test(*training_data(model, data, est_train), take=data.part)
-
-        def try_round(part, trials, try_one=try_one, try_key=try_key, cv=cv):
-            # a key try_key has already calibrated is not calibrated again
-            part = [r for r in part if by_key.get(r.candidate.key) is None]
-            if trials:
-                notes.append(
-                    f"step {len(steps) + 1}: none of "
-                    + ", ".join(f"{t.key} ({t.cv_rms:.4g} N·m)" for t in trials)
-                    + f" lowers the cross-validated torque error ({cv.torque_rms:.4g} N·m) by "
-                    f"{_percent(options.min_torque_gain)}; the next eligible tried: "
-                    + ", ".join(r.candidate.key for r in part)
-                )
-            tried = _shortlist_trials(part, ranking, try_one, notes, options)
-            by_key.update({t.key: t for t in tried})
-            taken = frozenset(t.key for t in trials) | {r.candidate.key for r in part}
-            return trials + read_speed_trials(tried, data, try_key, taken)
-
-        shortlist, trials = shortlist_rounds(
-            eligible(ranked, options, aliased), options, cv.torque_rms, try_round
-        )
-
-        determined = determination(model, data, est_train)
-        best = choose(
-            trials, cv, plan.blocks_rec, options, notes, lambda t: determined(t.candidate.term)
-        )
+            best = _carried_trial(carried[len(steps)], ranked, try_one, notes, cv, n)
+            carried = carried if best else ()  # one that cannot be added ends the carrying
+        best = best or _chosen_trial(run, model, est_train, cv, ranked, ranking, try_one, n)
         if best is None:
-            notes.append(no_step_note(trials, shortlist, cv, options))
             break
-        # the reading's trial must pass the test the chosen trial passed
-        passing = [t for t in trials if qualifies(t.cv_rms, cv.torque_rms, options)]
-        best = speed_reading(best, passing, data, notes, try_key)
         step = _step(run, best, model, est_train, ranked, ranking, spectra)
+        steps.append(dataclasses.replace(step, carried=best.candidate.origin == "carried"))
         model, est_train, cv = best.model, best.estimate, best.cv
-        steps.append(step)
         path.append(cv)
         say_step(steps, run.base_metrics, run.say, notes)
     gate = path if reference is None else [reference, *path[1:]]

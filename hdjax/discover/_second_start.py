@@ -122,6 +122,22 @@ def second_path_reason(
     return None
 
 
+def _path_without(quiet: LoopRun, start, base_cv, found: LoopPath, motion: list[bool]):
+    """The path from `start` (the model without the kinematic columns, its TRAIN estimate and
+    cross-validation), step by step; when it takes no step, the path again with `found`'s
+    motion effects (flagged in `motion`) carried over first, their terms as found. Returns the
+    path and the candidates carried (none when the first is returned)."""
+    alt = add_effects(quiet, *start, reference=base_cv)
+    if alt.steps:
+        return alt, ()
+    # effects that need each other there (a hysteresis beside the skew the columns took up)
+    # cannot be added one at a time; a hysteresis keeps its width: on this start's residual,
+    # where the skew the columns took up is back, the grid would choose another
+    steps = [s for s, flag in zip(found.steps, motion) if flag]
+    carried = tuple(Candidate(s.key, s.family, s.term, "carried") for s in steps)
+    return add_effects(quiet, *start, reference=base_cv, carried=carried), carried
+
+
 def without_kinematic(run: LoopRun, train, found: LoopPath, base_cv: CrossValidation) -> LoopPath:
     """The loop's path from the starting structure without the paper's kinematic columns
     (eq. (9)), on the same folds, kept instead of `found` by the one-standard-error rule
@@ -189,18 +205,7 @@ def without_kinematic(run: LoopRun, train, found: LoopPath, base_cv: CrossValida
         run.say(why)
         return found._replace(notes=[*found.notes, why])
     quiet = run._replace(options=alt_options, say=lambda _: None)
-    # the found effects as they are (a hysteresis keeps its width: on this start's residual,
-    # where the skew the columns took up is back, the grid would choose another)
-    steps = [s for s, flag in zip(found.steps, motion) if flag]
-    carried = tuple(Candidate(s.key, s.family, s.term, "carried") for s in steps)
-    # effects that need each other there (a hysteresis beside the skew the columns took up)
-    # cannot be added one at a time: when no single one lowers the error, the path starts
-    # again with the first path's motion effects carried over
-    carry: tuple = ()
-    alt = add_effects(quiet, model, est_train, cv, reference=base_cv)
-    if not alt.steps:
-        carry = carried
-        alt = add_effects(quiet, model, est_train, cv, reference=base_cv, carried=carry)
+    alt, carry = _path_without(quiet, (model, est_train, cv), base_cv, found, motion)
     n_coef = (found.model.n_coef, alt.model.n_coef)
     why = alt.steps and second_path_reason(found.cv, alt.cv, n_coef, run.plan.blocks_rec, options)
     if not why:
