@@ -136,21 +136,22 @@ def _carried_trial(carry, ranked, try_one, notes, cv, n: int) -> Trial | None:
     rule (the path is judged whole); scored with its key's gain and stability on this path's
     library, against `cv`, the cross-validation before it. `None` (with a note) when the
     library offers no such key or the term does not calibrate."""
-    for r in (r for r in ranked if r.candidate.key == carry.key):
-        try:
-            best = try_one(carry, r.gain, r.fold_gains, r.stability)
-        except (CalibrationError, InversionError) as err:
-            notes.append(f"carried effect {carry.key} could not be added: {err}")
-            return None
-        notes.append(
-            f"step {n}: {best.key} carried over from the path with the configured structure, "
-            "its term as found there, whatever its own gain (cross-validated torque RMS "
-            f"{cv.torque_rms:.4g} -> {best.cv_rms:.4g} N·m; the path is judged whole; the "
-            "twist gain and stability shown are its key's best candidate's on this path)"
-        )
-        return best
-    notes.append(f"carried effect {carry.key} not added: this path's library does not offer it")
-    return None
+    r = next((r for r in ranked if r.candidate.key == carry.key), None)
+    if r is None:
+        notes.append(f"carried effect {carry.key} not added: this path's library does not offer it")
+        return None
+    try:
+        best = try_one(carry, r.gain, r.fold_gains, r.stability)
+    except (CalibrationError, InversionError) as err:
+        notes.append(f"carried effect {carry.key} could not be added: {err}")
+        return None
+    notes.append(
+        f"step {n}: {best.key} carried over from the path with the configured structure, "
+        "its term as found there, whatever its own gain (cross-validated torque RMS "
+        f"{cv.torque_rms:.4g} -> {best.cv_rms:.4g} N·m; the path is judged whole; the "
+        "twist gain and stability shown are its key's best candidate's on this path)"
+    )
+    return best
 
 
 def _chosen_trial(run: LoopRun, model, est_train, cv, ranked, ranking, try_one, n: int):

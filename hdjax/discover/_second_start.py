@@ -131,8 +131,8 @@ def _path_without(quiet: LoopRun, start, base_cv, found: LoopPath, motion: list[
     if alt.steps:
         return alt, ()
     # effects that need each other there (a hysteresis beside the skew the columns took up)
-    # cannot be added one at a time; a hysteresis keeps its width: on this start's residual,
-    # where the skew the columns took up is back, the grid would choose another
+    # cannot be added one at a time; a hysteresis keeps its width found with the columns:
+    # on this start's residual, where that skew is back, the grid would choose another
     steps = [s for s, flag in zip(found.steps, motion) if flag]
     carried = tuple(Candidate(s.key, s.family, s.term, "carried") for s in steps)
     return add_effects(quiet, *start, reference=base_cv, carried=carried), carried
