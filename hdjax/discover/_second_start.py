@@ -163,7 +163,7 @@ def without_kinematic(run: LoopRun, train, found: LoopPath, base_cv: CrossValida
     Effects are carried over only where no single one can start: where one can, carrying
     them as well gave, on a one-way sweep from rest, a lower cross-validated error through
     harmonics of the output angle that made up for a width chosen beside the columns, and a
-    TEST error 2.6 times as large (one-sweep hysteresis draw 1).
+    larger TEST error (one-sweep hysteresis draw 1 of `benchmarks/real_log_cases.py`).
 
     The other path is followed only when the configured one added an effect of a family the
     columns compete with (`MOTION_FAMILIES`), and the columns span a share of that effect's
