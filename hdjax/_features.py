@@ -9,7 +9,7 @@ network's features, the hybrid and joint fits and the residual loop all start fr
 from __future__ import annotations
 
 import typing
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -194,23 +194,25 @@ class Signals(eqx.Module):
         )
 
 
-def derive_signals(
-    recording: Recording,
-    ratio: float,
-    twist_sign: float,
-    *,
-    velocity: str = "difference",
-    half_window: int = 5,
-    causal: bool = False,
-) -> Signals:
-    """[`hdjax.signals`][] with the joint given by its ratio and twist sign (both required)."""
+Velocity = Callable[[ArrayLike, ArrayLike], Array]
+
+
+def velocity_estimator(velocity: str, half_window: int, causal: bool) -> Velocity:
+    """The velocity of a sampled angle, `(t, x) -> ω`: the paper's backward difference
+    (`"difference"`, Song et al. eqs. (13)-(14)) or a local least-squares line over
+    `2*half_window+1` samples (`"smoothed"`); `causal` uses each sample and earlier ones only."""
     if velocity not in VELOCITY_METHODS:
         raise DataError(f"velocity must be one of {VELOCITY_METHODS}, got {velocity!r}")
-    diff = (
-        (lambda t, x: finite_difference_velocity(t, x, causal=causal))
-        if velocity == "difference"
-        else (lambda t, x: smoothed_velocity(t, x, half_window, causal=causal))
-    )
+    if velocity == "difference":
+        return lambda t, x: finite_difference_velocity(t, x, causal=causal)
+    return lambda t, x: smoothed_velocity(t, x, half_window, causal=causal)
+
+
+def derive_signals(
+    recording: Recording, ratio: float, twist_sign: float, diff: Velocity
+) -> Signals:
+    """[`hdjax.signals`][] with the joint given by its ratio and twist sign, and the velocity
+    by `diff` (from `velocity_estimator`)."""
     return Signals(
         twist=twist(recording.theta_m, recording.theta_l, ratio, twist_sign),
         current=jnp.asarray(recording.current, jnp.float64),
@@ -250,11 +252,5 @@ def signals(
     """
     if not isinstance(joint, Joint):
         raise DataError(f"signals() needs an hdjax.Joint, got {type(joint).__name__}")
-    return derive_signals(
-        recording,
-        joint.ratio,
-        joint.twist_sign,
-        velocity=velocity,
-        half_window=half_window,
-        causal=causal,
-    )
+    diff = velocity_estimator(velocity, half_window, causal)
+    return derive_signals(recording, joint.ratio, joint.twist_sign, diff)

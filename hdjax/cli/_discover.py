@@ -36,7 +36,7 @@ from ..discover.internal import (
     load_discover_config,
     load_selection,
     refit_on_whole_log,
-    write_report_into,
+    write_report,
 )
 from ..report import ResultDir
 from ._common import Parser
@@ -288,9 +288,9 @@ def _run_into(rd, args: argparse.Namespace) -> int:
         result = refit_on_whole_log(result, args.train, test, joint, args.chunk, selection)
     say("writing report" + ("" if args.no_figures else " and figures"))
     experiment, missing = _experiment(args, joint, context_split)
-    write_report_into(
-        rd,
+    write_report(
         result,
+        rd,
         joint=joint,
         train=train,
         figures=not args.no_figures,

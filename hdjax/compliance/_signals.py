@@ -4,7 +4,12 @@ are derived)."""
 from __future__ import annotations
 
 from .._errors import ConfigError
-from .._features import VELOCITY_METHODS as VELOCITY_METHODS, Signals as Signals, derive_signals
+from .._features import (
+    VELOCITY_METHODS as VELOCITY_METHODS,
+    Signals as Signals,
+    derive_signals,
+    velocity_estimator,
+)
 from .._joint import Joint
 from .._recording import Recording
 
@@ -33,4 +38,5 @@ def signals_from_recording(
         ratio, sign = joint.ratio, joint.twist_sign
     else:
         ratio, sign = joint, 1.0 if twist_sign is None else twist_sign
-    return derive_signals(recording, ratio, sign, velocity=velocity, half_window=half_window)
+    diff = velocity_estimator(velocity, half_window, causal=False)
+    return derive_signals(recording, ratio, sign, diff)

@@ -318,40 +318,33 @@ def _checks_lines(d: dict) -> list[str]:
 
 def write_report(
     solution: Solution,
-    out: PathLike,
+    out: PathLike | ResultDir,
     *,
     train: CalibrationData | None = None,
     figures: bool = True,
     extra: dict[str, Any] | None = None,
     overwrite: bool = False,
     joint: Joint | None = None,
+    experiment: str = "",
 ) -> dict[str, Any]:
     """Write `report.json`, `report.md`, `figures/` and (given the `joint`) `model.json` of
     a [`hdjax.discover.discover`][] solution into the result folder `out`, atomically, by the
     rules of every hdjax result folder ([`hdjax.report.ResultDir`][]: `out` absent or empty,
-    or an earlier hdjax result with `overwrite`); returns the report dict."""
-    with ResultDir(out, overwrite=overwrite, command="discover") as rd:
-        return write_report_into(
-            rd, solution, train=train, figures=figures, extra=extra, joint=joint
-        )
+    or an earlier hdjax result with `overwrite`), or into an open `ResultDir` (the command
+    line's, which commits it); returns the report dict.
 
-
-def write_report_into(
-    rd: ResultDir,
-    solution: Solution,
-    *,
-    train: CalibrationData | None = None,
-    figures: bool = True,
-    extra: dict[str, Any] | None = None,
-    joint: Joint | None = None,
-    experiment: str = "",
-) -> dict[str, Any]:
-    """[`write_report`][] into an open [`hdjax.report.ResultDir`][] (the command line's):
-    the model and the report first, then the figures in one pass, `report.md` naming them
-    last. The model file is the one `hdjax estimate`, `hdjax run --model` and `hdjax export`
-    read ([`hdjax.modelfile.save_model`][]); `experiment`, when given, is written as
-    `experiment.toml` (the lines that reproduce the final model with `hdjax run`, from
-    `hdjax.discover._experiment`); `report.md` ends with the commands that use them."""
+    The model and the report are written first, then the figures in one pass, `report.md`
+    naming them last. The model file is the one `hdjax estimate`, `hdjax run --model` and
+    `hdjax export` read ([`hdjax.modelfile.save_model`][]); `experiment`, when given, is
+    written as `experiment.toml` (the lines that reproduce the final model with `hdjax run`,
+    from `hdjax.discover._experiment`); `report.md` ends with the commands that use them."""
+    if not isinstance(out, ResultDir):
+        with ResultDir(out, overwrite=overwrite, command="discover") as rd:
+            return write_report(
+                solution, rd, train=train, figures=figures, extra=extra, joint=joint,
+                experiment=experiment,
+            )  # fmt: skip
+    rd = out
     d = report_dict(solution, extra=extra)
     if experiment:
         rd.write_text("experiment.toml", experiment)

@@ -126,12 +126,7 @@ def refit_on_whole_log(
         return _with(solution, record, notes, selection | {"refit": "selection"})
     base_m, base_est = test_errors(base, test, joint.rated_torque)
     final_m, final_est = (
-        test_errors(final, test, joint.rated_torque)
-        if record.steps
-        else (
-            base_m,
-            base_est,
-        )
+        test_errors(final, test, joint.rated_torque) if record.steps else (base_m, base_est)
     )
     old = record.steps[-1].torque_estimate if record.steps else record.baseline_estimate
     moved = float(np.sqrt(np.mean((np.asarray(final_est) - np.asarray(old)) ** 2)))

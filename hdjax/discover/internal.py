@@ -11,7 +11,7 @@ from ._config import (
 )
 from ._experiment import experiment_toml as experiment_toml
 from ._loop import discover as discover
-from ._report import write_report_into as write_report_into
+from ._report import write_report as write_report
 from ._start import paper_model as paper_model
 from ._subsample import (
     SELECT_BLOCKS as SELECT_BLOCKS,
