@@ -6,6 +6,8 @@ removed on the way out (a sweep keeps its finished members for resuming). The ex
 swallowed when it lands inside a callback Python runs on its own (JAX's garbage-collection
 callback is one), so the signal is also remembered: [`check`][] raises it again at the next
 progress line and before a result is moved into place, and the command's exit code reports it.
+When it lands inside C code it can surface as another error (a `SystemError`, "returned a result
+with an exception set"); with a signal remembered, the command line reports that as the interrupt.
 Before the command starts (while Python imports JAX) there is nothing to clean up, and a signal
 ends the process at once with the same exit codes.
 """

@@ -209,6 +209,30 @@ def test_a_swallowed_interrupt_still_ends_the_command(tmp_path, monkeypatch, cap
     assert pending() is None  # and the next command in this process starts clean
 
 
+def test_an_interrupt_that_surfaces_as_another_error_still_ends_the_command(
+    tmp_path, monkeypatch, capsys
+):
+    """A signal that lands inside C code (numpy's dtype hook, called by JAX) can surface as a
+    `SystemError` ("returned a result with an exception set") instead of the interrupt: the
+    command still ends as interrupted, with its exit code and no traceback or result."""
+    from hdjax.cli import main
+    from hdjax.pipelines import internal as _pipeline
+
+    (tmp_path / "cfg.toml").write_text(CONFIG.replace("timing = true", "timing = false"))
+
+    def calibrate_cut_inside_c_code(*a, **k):
+        try:
+            signal.raise_signal(signal.SIGTERM)
+        except BaseException as err:
+            raise SystemError("<function> returned a result with an exception set") from err
+
+    monkeypatch.setattr(_pipeline, "calibrate", calibrate_cut_inside_c_code)
+    code = main(["run", str(tmp_path / "cfg.toml"), "--out", str(tmp_path / "o"), "-q"])
+    assert code == 143
+    assert capsys.readouterr().err.strip() == "hdjax: interrupted (SIGTERM)"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cfg.toml"]
+
+
 def test_a_swallowed_interrupt_ends_the_timing_loop():
     """The timing stage repeats one call up to a million times; a signal swallowed inside it
     (as JAX's gc callback does) must end the loop, not leave the command running for minutes."""

@@ -166,6 +166,12 @@ def main(argv=None) -> int:
             code = fail(os_error_line(err))
         except ParserExit as done:
             code = done.status
+        except Exception:
+            if pending() is None:
+                raise
+            # a signal that lands inside C code (numpy's dtype hook, say) can surface as
+            # another error ("returned a result with an exception set"): still an interrupt
+            return interrupted(pending())
         if pending() is not None:
             return interrupted(pending())
         return code
