@@ -33,6 +33,7 @@ from ._folds import FoldPlan
 from ._options import DiscoverOptions, _percent
 from ._pipeline import CrossValidation, PipelineData, calibrate, cross_validate
 from ._record import DiscoveryStep
+from ._refine import refined_trial, setting_text
 from ._scores import score_candidates, training_data
 from ._timing import Phases, null_phases
 
@@ -145,9 +146,11 @@ def _carried_trial(carry, ranked, try_one, notes, cv, n: int) -> Trial | None:
     except (CalibrationError, InversionError) as err:
         notes.append(f"carried effect {carry.key} could not be added: {err}")
         return None
+    setting = setting_text(carry.term)
     notes.append(
         f"step {n}: {best.key} carried over from the path with the configured structure, "
-        "its term as found there, whatever its own gain (cross-validated torque RMS "
+        f"its term as found there{f' ({setting})' if setting else ''}, "
+        "whatever its own gain (cross-validated torque RMS "
         f"{cv.torque_rms:.4g} -> {best.cv_rms:.4g} N·m; the path is judged whole; the "
         "twist gain and stability shown are its key's best candidate's on this path)"
     )
@@ -156,8 +159,9 @@ def _carried_trial(carry, ranked, try_one, notes, cv, n: int) -> Trial | None:
 
 def _chosen_trial(run: LoopRun, model, est_train, cv, ranked, ranking, try_one, n: int):
     """Step `n` by the loop's rule: shortlist, try and choose
-    ([`hdjax.discover._decision.choose`][]), with the speed reading; `None` (with a note)
-    when no candidate qualifies."""
+    ([`hdjax.discover._decision.choose`][]), with the speed reading, and the chosen effect's
+    setting refined ([`hdjax.discover._refine.refined_trial`][]); `None` (with a note) when no
+    candidate qualifies."""
     data, options, notes = run.data, run.options, run.notes
     by_key: dict = {}  # this step's trials by key (None: could not be calibrated)
 
@@ -193,7 +197,8 @@ def _chosen_trial(run: LoopRun, model, est_train, cv, ranked, ranking, try_one, 
         return None
     # the reading's trial must pass the test the chosen trial passed
     passing = [t for t in trials if qualifies(t.cv_rms, cv.torque_rms, options)]
-    return speed_reading(best, passing, data, notes, try_key)
+    best = speed_reading(best, passing, data, notes, try_key)
+    return refined_trial(best, try_one, options, notes, n)
 
 
 def add_effects(

@@ -80,6 +80,7 @@ from ._registry import (
     families as families,
     in_slot as in_slot,
     library_options as library_options,
+    neighbours as neighbours,
     plant_effect as plant_effect,
     plant_effect_names as plant_effect_names,
     plant_effects as plant_effects,

@@ -580,7 +580,10 @@ class AbstractFamily(eqx.Module):
     - `options`: library options (grids) with their defaults (default none); they become
       fields of [`hdjax.discover.LibraryOptions`][].
 
-    **Method:** `candidates(ctx)`: the terms to try at one step of the residual loop.
+    **Methods:** `candidates(ctx)`: the terms to try at one step of the residual loop;
+    `neighbours(term, step)`: where a family's candidate has a continuous setting offered on
+    a grid (a hysteresis width), the term with that setting a factor `step` up and down, which
+    the loop tries to refine the setting it chose (default: none).
     """
 
     name: eqx.AbstractClassVar[str]
@@ -614,6 +617,10 @@ class AbstractFamily(eqx.Module):
     @abc.abstractmethod
     def candidates(self, ctx: CandidateContext) -> list[Candidate]:
         """The candidate terms of this family for one step of the residual loop."""
+
+    def neighbours(self, term: AbstractTerm, step: float) -> list[AbstractTerm]:
+        """`term` with its continuous setting a factor `step` up and down (none by default)."""
+        return []
 
 
 class AbstractTorqueScaleFamily(AbstractFamily):

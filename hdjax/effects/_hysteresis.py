@@ -791,3 +791,14 @@ class HysteresisFamily(AbstractFamily):
             for f in fractions
             for z0 in starts
         ]
+
+    def neighbours(self, term: AbstractTerm, step: float) -> list[AbstractTerm]:
+        """A Dahl state of the measured twist ([`TwistHysteresis`][]) with its width
+        `torque_scale` a factor `step` up and down, the initial state and play kept: the grid
+        of `dahl_fractions` is a factor 2-2.5 apart, and on a one-way sweep from rest the
+        transition from the initial state, which the width shapes, is most of the loop."""
+        if not isinstance(term, TwistHysteresis):
+            return []
+        return [
+            dataclasses.replace(term, torque_scale=term.torque_scale * f) for f in (step, 1 / step)
+        ]

@@ -79,6 +79,15 @@ def term_type(name: str) -> type[AbstractTerm]:
     return types[name]
 
 
+def neighbours(term: AbstractTerm, step: float) -> list[AbstractTerm]:
+    """`term` with its continuous setting a factor `step` up and down, by its family's
+    [`hdjax.effects.AbstractFamily`][]`.neighbours` (none for a term without one)."""
+    for f in _FAMILIES:
+        if type(term) in f.terms:
+            return f.neighbours(term, step)
+    return []
+
+
 def plant_effects() -> tuple[PlantEffect, ...]:
     """Every registered plant effect, in registration order."""
     return tuple(p for f in _FAMILIES for p in f.plant_effects)
