@@ -44,9 +44,10 @@ def refined_trial(
     notes: list[str],
     n: int,
 ) -> Trial:
-    """`best` with its continuous setting moved to the neighbour with the lowest
-    cross-validated torque RMS (see the module docstring); `best` itself when its family has
-    no such setting or no neighbour lowers the error by `min_torque_gain`."""
+    """`best` with its continuous setting moved, neighbour by neighbour, while a move lowers
+    the cross-validated torque RMS by `min_torque_gain` (a pattern search, see the module
+    docstring: the first neighbour that does is taken, the step up tried first); `best`
+    itself when its family has no such setting or no neighbour lowers the error so."""
     current, step, tries = best, FIRST_STEP, 0
     while step >= MIN_STEP * (1 - 1e-9) and tries < MAX_TRIES:
         moved = False
@@ -68,8 +69,7 @@ def refined_trial(
         notes.append(
             f"step {n}: {best.key}'s setting refined by the cross-validated torque error: "
             f"{setting_text(best.candidate.term)} -> {setting_text(current.candidate.term)} "
-            f"({best.cv_rms:.4g} -> "
-            f"{current.cv_rms:.4g} N·m, {tries} trials)"
+            f"({best.cv_rms:.4g} -> {current.cv_rms:.4g} N·m, {tries} trials)"
         )
     return current
 
