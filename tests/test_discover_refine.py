@@ -15,8 +15,8 @@ from hdjax._errors import CalibrationError
 from hdjax.discover import DiscoverOptions
 from hdjax.discover._decision import Trial
 from hdjax.discover._pipeline import CrossValidation
-from hdjax.discover._refine import MAX_TRIES, MIN_STEP, refined_trial, setting_text
-from hdjax.effects import Candidate, Coulomb, TwistHysteresis, neighbours
+from hdjax.discover._refine import MAX_TRIES, MIN_STEP, refined_trial
+from hdjax.effects import Candidate, Coulomb, TwistHysteresis, neighbours, setting_text
 
 OPTIONS = DiscoverOptions()
 

@@ -10,6 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .. import effects
 from .._errors import CalibrationError, InversionError
 from .._joint import Joint
 from .._metrics import ErrorMetrics
@@ -33,7 +34,7 @@ from ._folds import FoldPlan
 from ._options import DiscoverOptions, _percent
 from ._pipeline import CrossValidation, PipelineData, calibrate, cross_validate
 from ._record import DiscoveryStep
-from ._refine import refined_trial, setting_text
+from ._refine import refined_trial
 from ._scores import score_candidates, training_data
 from ._timing import Phases, null_phases
 
@@ -146,7 +147,7 @@ def _carried_trial(carry, ranked, try_one, notes, cv, n: int) -> Trial | None:
     except (CalibrationError, InversionError) as err:
         notes.append(f"carried effect {carry.key} could not be added: {err}")
         return None
-    setting = setting_text(carry.term)
+    setting = effects.setting_text(carry.term)
     notes.append(
         f"step {n}: {best.key} carried over from the path with the configured structure, "
         f"its term as found there{f' ({setting})' if setting else ''}, "

@@ -68,15 +68,8 @@ def refined_trial(
     if current is not best:
         notes.append(
             f"step {n}: {best.key}'s setting refined by the cross-validated torque error: "
-            f"{setting_text(best.candidate.term)} -> {setting_text(current.candidate.term)} "
+            f"{effects.setting_text(best.candidate.term)} -> "
+            f"{effects.setting_text(current.candidate.term)} "
             f"({best.cv_rms:.4g} -> {current.cv_rms:.4g} N·m, {tries} trials)"
         )
     return current
-
-
-def setting_text(term) -> str:
-    """The continuous setting [`refined_trial`][] moves, as a report writes it (a hysteresis
-    width); empty for a term without one."""
-    if not effects.neighbours(term, FIRST_STEP):
-        return ""
-    return f"width {term.torque_scale:.4g} N·m"

@@ -85,6 +85,7 @@ from ._registry import (
     plant_effect_names as plant_effect_names,
     plant_effects as plant_effects,
     register as register,
+    setting_text as setting_text,
     term_type as term_type,
     term_types as term_types,
     unregister as unregister,

@@ -583,7 +583,8 @@ class AbstractFamily(eqx.Module):
     **Methods:** `candidates(ctx)`: the terms to try at one step of the residual loop;
     `neighbours(term, step)`: where a family's candidate has a continuous setting offered on
     a grid (a hysteresis width), the term with that setting a factor `step` up and down, which
-    the loop tries to refine the setting it chose (default: none).
+    the loop tries to refine the setting it chose (default: none), and `setting_text(term)`,
+    that setting as the loop's notes write it.
     """
 
     name: eqx.AbstractClassVar[str]
@@ -621,6 +622,10 @@ class AbstractFamily(eqx.Module):
     def neighbours(self, term: AbstractTerm, step: float) -> list[AbstractTerm]:
         """`term` with its continuous setting a factor `step` up and down (none by default)."""
         return []
+
+    def setting_text(self, term: AbstractTerm) -> str:
+        """The setting `neighbours` moves, as a report writes it (empty by default)."""
+        return ""
 
 
 class AbstractTorqueScaleFamily(AbstractFamily):

@@ -802,3 +802,7 @@ class HysteresisFamily(AbstractFamily):
         return [
             dataclasses.replace(term, torque_scale=term.torque_scale * f) for f in (step, 1 / step)
         ]
+
+    def setting_text(self, term: AbstractTerm) -> str:
+        """The width of a [`TwistHysteresis`][], in N·m of torque path."""
+        return f"width {term.torque_scale:.4g} N·m" if isinstance(term, TwistHysteresis) else ""

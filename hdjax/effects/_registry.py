@@ -79,13 +79,22 @@ def term_type(name: str) -> type[AbstractTerm]:
     return types[name]
 
 
+def _family_of(term: AbstractTerm) -> AbstractFamily | None:
+    return next((f for f in _FAMILIES if type(term) in f.terms), None)
+
+
 def neighbours(term: AbstractTerm, step: float) -> list[AbstractTerm]:
     """`term` with its continuous setting a factor `step` up and down, by its family's
     [`hdjax.effects.AbstractFamily`][]`.neighbours` (none for a term without one)."""
-    for f in _FAMILIES:
-        if type(term) in f.terms:
-            return f.neighbours(term, step)
-    return []
+    family = _family_of(term)
+    return family.neighbours(term, step) if family else []
+
+
+def setting_text(term: AbstractTerm) -> str:
+    """The setting [`neighbours`][] moves, as the loop's notes write it (a hysteresis width),
+    by its family; empty for a term without one."""
+    family = _family_of(term)
+    return family.setting_text(term) if family else ""
 
 
 def plant_effects() -> tuple[PlantEffect, ...]:
